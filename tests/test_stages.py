@@ -1,0 +1,64 @@
+"""Stage cache, resume after a kill, and the stage log (issue 2/6 'robust runs')."""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from fe_joint.config import load_case
+from fe_joint.stages import STAGES, StageNotBuilt, read_stage_log, run_stages, stage_keys
+
+
+class Killed(Exception):
+    pass
+
+
+def _registry(calls: list, kill_at: str | None = None) -> dict:
+    def make(name):
+        def f(ctx):
+            if name == kill_at:
+                raise Killed(name)
+            calls.append(name)
+            return {"n": len(calls)}
+        return f
+    return {s: make(s) for s in STAGES}
+
+
+def test_rerun_skips_finished_stages(tmp_path: Path) -> None:
+    case = load_case(preset="quick")
+    calls: list = []
+    # a run killed in 'reduce': mesh and preload are finished and logged
+    with pytest.raises(Killed):
+        run_stages(case, tmp_path, ("contact",), _registry(calls, kill_at="reduce"))
+    assert calls == ["mesh", "preload"]
+    calls.clear()
+    run_stages(case, tmp_path, ("contact",), _registry(calls))
+    assert calls == ["reduce", "contact"]          # resumed where it stopped
+    log = read_stage_log(tmp_path)
+    assert [(e["stage"], e["action"]) for e in log] == [
+        ("mesh", "ran"), ("preload", "ran"), ("mesh", "cached"), ("preload", "cached"),
+        ("reduce", "ran"), ("contact", "ran")]
+
+
+def test_changed_section_reruns_downstream_only(tmp_path: Path) -> None:
+    case = load_case(preset="quick")
+    calls: list = []
+    run_stages(case, tmp_path, STAGES, _registry(calls))
+    assert calls == list(STAGES)
+    # friction coefficient: contact onwards must rerun, FE stages must not
+    case2 = dataclasses.replace(case, contact=dataclasses.replace(case.contact, mu=0.3))
+    k1, k2 = stage_keys(case), stage_keys(case2)
+    assert [s for s in STAGES if k1[s] != k2[s]] == ["contact", "dynamics", "report"]
+    calls.clear()
+    run_stages(case2, tmp_path, STAGES, _registry(calls))
+    assert calls == ["contact", "dynamics", "report"]
+    calls.clear()
+    run_stages(case2, tmp_path, STAGES, _registry(calls), force=False)
+    assert calls == []
+
+
+def test_missing_stage_is_reported(tmp_path: Path) -> None:
+    case = load_case(preset="quick")
+    with pytest.raises(StageNotBuilt, match="mesh"):
+        run_stages(case, tmp_path, ("mesh",), {})
