@@ -1,0 +1,22 @@
+"""hbm — multiharmonic balance with 3D friction elements (numpy/scipy only).
+
+Public API (DESIGN §5)::
+
+    from hbm import LinearStructure, FrictionContacts, HarmonicBalance
+    s = LinearStructure(M, K, C)                 # or damping_ratio=0.001
+    c = FrictionContacts(dofs, kt=, kn=, mu=, n0=, gap=)
+    hb = HarmonicBalance(s, c, harmonics=3, samples=128)
+    sol = hb.solve(omega, force); sol.coefficients; sol.amplitude(dof)
+    frf = hb.frf(omega_start, omega_end, force, dof=d); frf.omega, frf.amplitude, frf.stable
+    er = hb.element_results(sol)                 # status, energy, mean_normal, u_t, T, N
+"""
+from .errors import ConvergenceError
+from .fourier import Fourier
+from .friction import FrictionContacts, STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OPEN, OPEN
+from .structure import LinearStructure
+from .harmonic_balance import HarmonicBalance, Solution, ElementResults
+from .continuation import FRFResult
+
+__all__ = ["ConvergenceError", "Fourier", "FrictionContacts", "LinearStructure", "HarmonicBalance",
+           "Solution", "ElementResults", "FRFResult", "STUCK", "STICK_SLIP", "GROSS_SLIP",
+           "PARTLY_OPEN", "OPEN"]

@@ -1,0 +1,14 @@
+"""Errors raised by the harmonic-balance package."""
+from __future__ import annotations
+
+
+class ConvergenceError(RuntimeError):
+    """A nonlinear iteration (Newton, continuation, cycle closure) did not converge.
+
+    Attributes:
+        residual: the residual norm reached when the iteration stopped.
+    """
+
+    def __init__(self, message: str, residual: float = float("nan")) -> None:
+        super().__init__(f"{message} (residual reached: {residual:.3e})")
+        self.residual = float(residual)

@@ -1,0 +1,395 @@
+"""3D friction contact elements (two coupled Jenkins directions + normal spring), vectorized.
+
+Each element joins a DOF triple of body A to one of body B (or ground) in its local frame
+(t1, t2, n). Relative displacement u = q_A - q_B; u_n > 0 closes (DESIGN §3).
+
+* Normal: N = max(0, n0 + kn (u_n - g)).
+* Tangential: slider w (2,), trial T* = kt (u_t - w); stick if |T*| <= mu N, else radial return
+  T = mu N T*/|T*| and the slider follows, w = u_t - T/kt (circular Coulomb limit, the two
+  directions are coupled). Separation (N = 0) gives T = 0 and resets the slider, w = u_t.
+* The force added to the structure's left-hand side is (T1, T2, N - n0) on A and the opposite on
+  B, so the preloaded rest state u = 0 adds nothing.
+
+The AFT evaluation starts each element from the rest state (w = 0, i.e. the preloaded equilibrium
+with no tangential load) at t = 0, and marches the period sample by sample (elastic predictor,
+radial-return corrector) until the state at t = T equals the state at t = 0 within ``close_tol``.
+Elements that stay closed and within the cone all cycle with w = 0 (stuck) or open all cycle are
+recognized by a vectorized test over all samples and never marched: stuck elements are exactly
+linear (T = kt u_t), open ones carry the constant -n0. The analytic Jacobian of the force
+harmonics is propagated through every step of the march (stick, slip projection, separation),
+including the cycles before closure, so it is the exact derivative of the computed map.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import math
+
+import numpy as np
+
+from .errors import ConvergenceError
+from .fourier import Fourier
+
+STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OPEN, OPEN = 0, 1, 2, 3, 4
+#: fraction of the cycle spent slipping above which a closed element counts as gross slip
+GROSS_SLIP_FRACTION = 0.9
+#: up to this many marched elements the forward march runs on Python floats (less overhead)
+SCALAR_LIMIT = 4
+
+
+def _param(name: str, value, ne: int, lo: float, allow_equal: bool = True) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        arr = np.full(ne, float(arr))
+    if arr.shape != (ne,):
+        raise ValueError(f"{name} must be a scalar or an array of shape ({ne},), got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite")
+    bad = arr < lo if allow_equal else arr <= lo
+    if np.any(bad):
+        rel = ">=" if allow_equal else ">"
+        raise ValueError(f"{name} must be {rel} {lo}, got min {arr.min()!r}")
+    return arr
+
+
+class FrictionContacts:
+    """A set of 3D friction elements.
+
+    Args:
+        dofs: int array (ne, 2, 3): DOF index of body A (row 0) and body B (row 1) for the
+            directions t1, t2, n; -1 means ground (zero displacement).
+        kt: tangential element stiffness, N/mm (scalar or (ne,)), > 0.
+        kn: normal element stiffness, N/mm, > 0.
+        mu: friction coefficient, >= 0.
+        n0: preload normal force, N, >= 0.
+        gap: initial normal gap g, mm (g > 0 open at rest); default 0.
+        close_tol: relative tolerance on the slider state for cycle closure.
+        max_cycles: cycles marched before declaring non-closure.
+    """
+
+    def __init__(self, dofs, kt, kn, mu, n0, gap=0.0, close_tol: float = 1e-10,
+                 max_cycles: int = 200) -> None:
+        d = np.asarray(dofs)
+        if d.ndim != 3 or d.shape[1:] != (2, 3):
+            raise ValueError(f"dofs must have shape (ne, 2, 3), got {d.shape}")
+        if d.shape[0] < 1:
+            raise ValueError("dofs must describe at least one element (ne >= 1)")
+        if not np.issubdtype(d.dtype, np.integer):
+            if not np.all(np.isfinite(d)) or np.any(d != np.round(d)):
+                raise ValueError("dofs must be integers (-1 = ground)")
+            d = d.astype(int)
+        if np.any(d < -1):
+            raise ValueError("dofs must be >= -1 (-1 = ground)")
+        self.dofs = d.astype(np.int64)
+        self.ne = d.shape[0]
+        ne = self.ne
+        self.kt = _param("kt", kt, ne, 0.0, allow_equal=False)
+        self.kn = _param("kn", kn, ne, 0.0, allow_equal=False)
+        self.mu = _param("mu", mu, ne, 0.0)
+        self.n0 = _param("n0", n0, ne, 0.0)
+        g = np.asarray(gap, dtype=float)
+        self.gap = np.full(ne, float(g)) if g.ndim == 0 else g
+        if self.gap.shape != (ne,) or not np.all(np.isfinite(self.gap)):
+            raise ValueError(f"gap must be a finite scalar or array of shape ({ne},)")
+        if not (0 < close_tol < 1):
+            raise ValueError(f"close_tol must be in (0, 1), got {close_tol}")
+        self.close_tol = float(close_tol)
+        self.max_cycles = int(max_cycles)
+        #: closed at rest (u = 0): these contribute their stuck stiffness to the linear base
+        self.closed_at_rest = self.n0 - self.kn * self.gap > 0.0
+
+    # ------------------------------------------------------------------ linear base
+    def base_stiffness(self) -> np.ndarray:
+        """Element stiffness of the linear base state, (ne, 3): (kt, kt, kn) if closed at rest, else 0."""
+        k = np.stack([self.kt, self.kt, self.kn], axis=1)
+        return k * self.closed_at_rest[:, None]
+
+    def check_dofs(self, n: int) -> None:
+        """Raise ValueError if a DOF index is outside 0..n-1 (or -1)."""
+        if np.any(self.dofs >= n):
+            raise ValueError(f"dofs must be < n = {n} (number of structure DOFs), got max {self.dofs.max()}")
+
+    # ------------------------------------------------------------------ classification
+    def _classify(self, u: np.ndarray, idx: np.ndarray):
+        """Vectorized over samples: open-all and stuck-all (from rest, w = 0) masks."""
+        N = self.n0[idx, None] + self.kn[idx, None] * (u[:, 2] - self.gap[idx, None])
+        open_all = np.all(N <= 0.0, axis=1)
+        closed_all = np.all(N > 0.0, axis=1)
+        T2 = self.kt[idx, None] ** 2 * (u[:, 0] ** 2 + u[:, 1] ** 2)
+        stuck_all = closed_all & np.all(T2 <= (self.mu[idx, None] * N) ** 2, axis=1)
+        return open_all, stuck_all
+
+    # ------------------------------------------------------------------ time march
+    def march(self, u: np.ndarray, idx: np.ndarray, fourier: Fourier | None = None,
+              jacobian: bool = False):
+        """March the elements ``idx`` over periods of the sampled motion until the cycle closes.
+
+        The forward pass only carries (k, 2) states. The Jacobian is obtained afterwards from the
+        recorded per-sample linearization, which is an affine recurrence for the slider
+        sensitivity, dw_{j+1} = A_j dw_j + S_j (x) E_j, with A_j = I (stick), rho (I - t t^T)
+        (slip, rho = mu N / |T*|, t = T*/|T*|) or 0 (open), and dT_j = Q_j (x) E_j - kt A_j dw_j.
+
+        Args:
+            u: relative displacement samples (k, 3, nt), mm.
+            idx: element indices (k,).
+            fourier: needed when jacobian=True.
+            jacobian: also return d(force samples)/d(harmonics).
+
+        Returns:
+            T (k, 2, nt) tangential force N, N (k, nt) normal force N, slip (k, nt) bool,
+            closed (k, nt) bool, cycles marched, and when jacobian: dT (k, 2, nt, 3 nH),
+            dN (k, nt, 3 nH) in the element's (direction, harmonic) layout.
+        """
+        k, _, nt = u.shape
+        kt1 = self.kt[idx]
+        kt = kt1[:, None]
+        mu = self.mu[idx]
+        kn = self.kn[idx]
+        Nall = np.maximum(0.0, self.n0[idx, None] + kn[:, None] * (u[:, 2] - self.gap[idx, None]))
+        closed = Nall > 0.0
+        lim_all = mu[:, None] * Nall
+        T = np.zeros((k, 2, nt))
+        slip = np.zeros((k, nt), dtype=bool)
+        rho = np.zeros((k, nt))
+        that = np.zeros((k, nt, 2))
+        scale = np.maximum(lim_all.max(axis=1), 1e-300) / kt1          # slider length scale, mm
+        if k <= SCALAR_LIMIT:
+            cycle, err, rec = self._forward_scalar(u, kt1, lim_all, closed, T, slip, rho, that,
+                                                   scale, jacobian)
+        else:
+            cycle, err, rec = self._forward_vector(u, kt, lim_all, closed, T, slip, rho, that,
+                                                   scale, jacobian)
+        if err > self.close_tol:
+            raise ConvergenceError(f"friction cycle did not close in {self.max_cycles} periods", err)
+        out = [T, Nall, slip, closed, cycle]
+        if jacobian:
+            if k <= SCALAR_LIMIT:
+                # per element: its own number of cycles
+                nx = 3 * fourier.nH
+                dT, dN = np.empty((k, 2, nt, nx)), np.empty((k, nt, nx))
+                for e in range(k):
+                    sl_ = slice(e, e + 1)
+                    cyc = [(np.array([a]), np.array([b]), np.stack([c1, c2], axis=-1)[None])
+                           for a, b, c1, c2 in rec[e]]
+                    dT[sl_], dN[sl_] = self._march_jacobian(cyc, closed[sl_], kt1[sl_], kn[sl_],
+                                                            mu[sl_], fourier)
+                out += [dT, dN]
+            else:
+                out += list(self._march_jacobian(rec, closed, kt1, kn, mu, fourier))
+        return out
+
+    def _forward_vector(self, u, kt, lim_all, closed, T, slip, rho, that, scale, jacobian):
+        """Forward march vectorized over elements (one numpy step per sample)."""
+        k, _, nt = u.shape
+        w = np.zeros((k, 2))
+        rec = []
+        ut_all = np.ascontiguousarray(u[:, 0:2].transpose(2, 0, 1))    # (nt, k, 2)
+        err = np.inf
+        for cycle in range(1, self.max_cycles + 1):
+            w_start = w.copy()
+            for j in range(nt):
+                ut = ut_all[j]
+                Ts = kt * (ut - w)
+                Tn = np.sqrt(Ts[:, 0] ** 2 + Ts[:, 1] ** 2)
+                lim = lim_all[:, j]
+                cj = closed[:, j]
+                sl = cj & (Tn > lim)
+                if sl.any():
+                    r = np.where(sl, lim / np.where(sl, Tn, 1.0), 1.0)
+                    rho[:, j] = np.where(sl, r, 0.0)
+                    that[:, j] = Ts / np.where(sl, Tn, 1.0)[:, None]
+                    Tj = Ts * (r * cj)[:, None]
+                else:
+                    rho[:, j] = 0.0
+                    Tj = Ts * cj[:, None]
+                T[:, :, j] = Tj
+                slip[:, j] = sl
+                stick = cj & ~sl
+                w = np.where(stick[:, None], w, ut - Tj / kt)
+            if jacobian:
+                rec.append((slip.copy(), rho.copy(), that.copy()))
+            err = np.max(np.abs(w - w_start).max(axis=1) / scale) if k else 0.0
+            if err <= self.close_tol:
+                break
+        return cycle, err, rec
+
+    def _forward_scalar(self, u, kt, lim_all, closed, T, slip, rho, that, scale, jacobian):
+        """Forward march with Python floats, element by element (faster for a few elements)."""
+        k, _, nt = u.shape
+        rec = []
+        cyc_max, err_max = 1, 0.0
+        ul = u[:, 0:2].tolist()
+        liml, cl = lim_all.tolist(), closed.tolist()
+        for e in range(k):
+            k_e = float(kt[e])
+            u1, u2, lim_e, c_e = ul[e][0], ul[e][1], liml[e], cl[e]
+            w1 = w2 = 0.0
+            Tl1, Tl2 = [0.0] * nt, [0.0] * nt
+            sll, rl, t1l, t2l = [False] * nt, [0.0] * nt, [0.0] * nt, [0.0] * nt
+            recs = []
+            err = np.inf
+            for cycle in range(1, self.max_cycles + 1):
+                s1, s2 = w1, w2
+                for j in range(nt):
+                    a, b = u1[j], u2[j]
+                    if not c_e[j]:
+                        Tl1[j] = Tl2[j] = 0.0
+                        sll[j] = False
+                        rl[j] = 0.0
+                        w1, w2 = a, b
+                        continue
+                    x, y = k_e * (a - w1), k_e * (b - w2)
+                    tn = math.sqrt(x * x + y * y)
+                    lim = lim_e[j]
+                    if tn > lim:
+                        r = lim / tn
+                        sll[j] = True
+                        rl[j] = r
+                        t1l[j], t2l[j] = x / tn, y / tn
+                        x, y = x * r, y * r
+                        w1, w2 = a - x / k_e, b - y / k_e
+                    else:
+                        sll[j] = False
+                        rl[j] = 0.0
+                    Tl1[j], Tl2[j] = x, y
+                if jacobian:
+                    recs.append((list(sll), list(rl), list(t1l), list(t2l)))
+                err = max(abs(w1 - s1), abs(w2 - s2)) / scale[e]
+                if err <= self.close_tol:
+                    break
+            T[e, 0], T[e, 1] = Tl1, Tl2
+            slip[e], rho[e] = sll, rl
+            that[e, :, 0], that[e, :, 1] = t1l, t2l
+            cyc_max, err_max = max(cyc_max, cycle), max(err_max, err)
+            rec.append(recs)
+        return cyc_max, err_max, rec
+
+    @staticmethod
+    def _march_jacobian(rec, closed, kt, kn, mu, fourier):
+        """Propagate the slider sensitivity through the recorded cycles (see ``march``)."""
+        k, nt = closed.shape
+        nH = fourier.nH
+        E = fourier.E
+        eye = np.eye(2)
+        dw = np.zeros((k, 2, 3 * nH))
+        for ic, (slip, rho, that) in enumerate(rec):
+            last = ic == len(rec) - 1
+            stick = closed & ~slip
+            # A_j (k, nt, 2, 2); S_j (k, nt, 2, 3); Q_j (k, nt, 2, 3)
+            P = eye - that[..., :, None] * that[..., None, :]
+            A = np.where(stick[..., None, None], eye, rho[..., None, None] * P)
+            c = (mu[:, None, None] * slip[..., None]) * that                 # (k, nt, 2)
+            cn = c * (kn[:, None, None] * closed[..., None])                 # c_j * dN/du_n
+            S = np.empty((k, nt, 2, 3))
+            S[..., 0:2] = eye - A
+            S[..., 2] = -cn / kt[:, None, None]
+            active = np.nonzero(~stick.all(axis=0))[0]                       # samples where dw may change
+            snaps = [dw]
+            for j in active:
+                dw = A[:, j] @ dw + (S[:, j, :, :, None] * E[j]).reshape(k, 2, 3 * nH)
+                snaps.append(dw)
+            if last:
+                # dw seen at sample j = after the updates of the active samples before j
+                which = np.searchsorted(active, np.arange(nt), side="left")
+                dws = np.stack(snaps, axis=1)[:, which]                      # (k, nt, 2, 3 nH)
+                Q = np.empty((k, nt, 2, 3))
+                Q[..., 0:2] = kt[:, None, None, None] * A
+                Q[..., 2] = cn
+                # dT_j = Q_j (x) E_j - kt A_j dw_j
+                dT = Q[..., None] * E[None, :, None, None, :]
+                dT = dT.reshape(k, nt, 2, 3 * nH) - kt[:, None, None, None] * (A @ dws)
+                dT = dT.transpose(0, 2, 1, 3)
+                dN = np.zeros((k, nt, 3, nH))
+                dN[:, :, 2] = (kn[:, None] * closed)[..., None] * E[None]
+                return dT, dN.reshape(k, nt, 3 * nH)
+
+    # ------------------------------------------------------------------ AFT
+    def evaluate(self, U: np.ndarray, fourier: Fourier, jacobian: bool = True):
+        """Force harmonics and their Jacobian for relative-displacement harmonics U.
+
+        Args:
+            U: (ne, 3, nH) harmonics of u = q_A - q_B in the element frame, mm.
+            fourier: the Fourier object (harmonics, samples).
+            jacobian: compute the Jacobian.
+
+        Returns:
+            F: (ne, 3, nH) harmonics of (T1, T2, N - n0), N.
+            nl: indices of the elements whose Jacobian differs from the linear base stiffness.
+            DF: (len(nl), 3 nH, 3 nH) Jacobian dF/dU of those elements, N/mm, in the element
+                layout index = direction * nH + harmonic (None when jacobian=False).
+        """
+        ne, nH = self.ne, fourier.nH
+        if U.shape != (ne, 3, nH):
+            raise ValueError(f"U must have shape ({ne}, 3, {nH}), got {U.shape}")
+        u = fourier.to_time(U)                                    # (ne, 3, nt)
+        allidx = np.arange(ne)
+        open_all, stuck_all = self._classify(u, allidx)
+        F = np.zeros((ne, 3, nH))
+        # stuck all cycle (slider at rest): exactly linear
+        s = stuck_all
+        F[s, 0:2] = self.kt[s, None, None] * U[s, 0:2]
+        F[s, 2] = self.kn[s, None] * U[s, 2]
+        F[s, 2, 0] -= self.kn[s] * self.gap[s]
+        # open all cycle: the structure still feels -n0
+        F[open_all, 2, 0] = -self.n0[open_all]
+        base = self.closed_at_rest
+        lin = (stuck_all & base) | (open_all & ~base)
+        marched = np.nonzero(~(open_all | stuck_all))[0]
+        nl = np.nonzero(~lin)[0]
+        DF = None
+        if jacobian:
+            DF = np.zeros((nl.size, 3 * nH, 3 * nH))
+            pos = np.full(ne, -1)
+            pos[nl] = np.arange(nl.size)
+            # stuck elements that are not in the base (closed only under vibration): kt, kn
+            sx = np.nonzero(stuck_all & ~base)[0]
+            if sx.size:
+                eye = np.eye(nH)
+                blk = np.zeros((sx.size, 3 * nH, 3 * nH))
+                for dd, kk in enumerate((self.kt[sx], self.kt[sx], self.kn[sx])):
+                    blk[:, dd * nH:(dd + 1) * nH, dd * nH:(dd + 1) * nH] = kk[:, None, None] * eye
+                DF[pos[sx]] = blk
+        if marched.size:
+            res = self.march(u[marched], marched, fourier, jacobian)
+            T, Nt = res[0], res[1]
+            F[marched, 0:2] = fourier.to_freq(T)
+            F[marched, 2] = fourier.to_freq(Nt - self.n0[marched, None])
+            if jacobian:
+                dT, dN = res[5], res[6]
+                D = fourier.D
+                blk = np.empty((marched.size, 3 * nH, 3 * nH))
+                blk[:, 0:nH] = np.einsum("hj,kjx->khx", D, dT[:, 0])
+                blk[:, nH:2 * nH] = np.einsum("hj,kjx->khx", D, dT[:, 1])
+                blk[:, 2 * nH:] = np.einsum("hj,kjx->khx", D, dN)
+                DF[pos[marched]] = blk
+        return F, nl, DF
+
+    # ------------------------------------------------------------------ post-processing
+    def histories(self, U: np.ndarray, fourier: Fourier):
+        """Time histories over one closed period and the per-element status.
+
+        Returns:
+            dict with u_t (ne, 2, nt) mm, T (ne, 2, nt) N, N (ne, nt) N (total normal force),
+            status (ne,) int, slip_fraction (ne,).
+        """
+        ne = self.ne
+        u = fourier.to_time(U)
+        allidx = np.arange(ne)
+        open_all, stuck_all = self._classify(u, allidx)
+        Nt = np.maximum(0.0, self.n0[:, None] + self.kn[:, None] * (u[:, 2] - self.gap[:, None]))
+        T = np.zeros((ne, 2, fourier.nt))
+        T[stuck_all] = self.kt[stuck_all, None, None] * u[stuck_all, 0:2]
+        slip = np.zeros((ne, fourier.nt), dtype=bool)
+        marched = np.nonzero(~(open_all | stuck_all))[0]
+        if marched.size:
+            res = self.march(u[marched], marched)
+            T[marched] = res[0]
+            slip[marched] = res[2]
+        closed = Nt > 0
+        frac = slip.mean(axis=1)
+        status = np.full(ne, STICK_SLIP)
+        status[frac >= GROSS_SLIP_FRACTION] = GROSS_SLIP
+        status[~slip.any(axis=1)] = STUCK
+        status[closed.any(axis=1) & ~closed.all(axis=1)] = PARTLY_OPEN
+        status[~closed.any(axis=1)] = OPEN
+        return {"u_t": u[:, 0:2].copy(), "T": T, "N": Nt, "status": status, "slip_fraction": frac}

@@ -1,0 +1,441 @@
+"""Multiharmonic balance of a linear structure with 3D friction contacts.
+
+Formulation (condensed on the contacts)
+--------------------------------------
+The unknowns are the harmonics U (n_H x n_c) of the contact relative displacements u = B q only
+(n_c = 3 n_e); the response of every structure DOF follows afterwards from the receptance. With the
+linear base K~ = K + B^T diag(k0) B (the contacts closed at rest, stuck), the balance per harmonic is
+
+    R(U, w) = U - U_lin(w) + G(w) g(U) = 0,      g = F_nl(U) - k0 U,
+
+where G is the base receptance (modal + static residual flexibility, see ``structure``) and g the
+nonlinear *correction* force. Elements stuck all cycle (from rest) or open all cycle (when open at
+rest) have dg/dU = 0, so the Newton matrix J = I + G dg/dU has identity columns there: the linear
+system is solved exactly on the nonlinear elements only (size 3 k n_H, k = number of elements that
+slip or separate somewhere in the cycle), and the other unknowns follow by one receptance product.
+Open-all-cycle elements thus carry no unknowns in the solve and stuck-all-cycle ones are linear.
+
+Linear solver (what we chose and why)
+-------------------------------------
+* k small (3 k n_H <= ``dense_limit``): the reduced Jacobian is formed and LU-factorized; it is a
+  few ms and Newton keeps quadratic convergence.
+* k large: the dense 3 k n_H system (7140 for 340 elements, H = 3; ~7 s per LU here) is never
+  factorized. GMRES runs on it matrix-free (one receptance product per iteration: modal low rank
+  + the dense static residual block), preconditioned by the exact inverse of the
+  *harmonic-averaged* Jacobian I + G_h(w) k_bar, where k_bar is each element's 3x3 mean tangent
+  stiffness: that operator does not couple harmonics, its static part I + R k_bar is one real
+  3k x 3k LU (reused for all harmonics and, while the contact state is unchanged, across Newton
+  steps), and its modal part is a rank-m Woodbury correction per harmonic. The friction coupling
+  between harmonics is what GMRES resolves, which takes a few tens of iterations.
+
+Newton uses a backtracking line search on ||R|| and raises ``ConvergenceError`` with the residual
+reached when it stalls.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .errors import ConvergenceError
+from .fourier import Fourier
+from .friction import FrictionContacts
+from .structure import LinearStructure, Receptance
+
+
+@dataclass
+class Solution:
+    """A periodic solution at one frequency.
+
+    Attributes:
+        omega: excitation frequency, rad/s.
+        coefficients: (2H+1, n) displacement harmonics of every DOF, mm ([a0, a1, b1, ...]).
+        contact: (ne, 3, 2H+1) harmonics of the element relative displacements (t1, t2, n), mm.
+        residual: relative residual norm reached.
+        iterations: Newton iterations used.
+        n_nonlinear: number of elements that slip or separate somewhere in the cycle.
+    """
+
+    omega: float
+    coefficients: np.ndarray
+    contact: np.ndarray
+    residual: float
+    iterations: int
+    n_nonlinear: int
+
+    def amplitude(self, dof: int, harmonic: int = 1) -> float:
+        """Amplitude sqrt(a_h^2 + b_h^2) of harmonic ``harmonic`` (default the first) at ``dof``, mm."""
+        X = self.coefficients[:, dof]
+        if harmonic == 0:
+            return float(abs(X[0]))
+        return float(np.hypot(X[2 * harmonic - 1], X[2 * harmonic]))
+
+
+@dataclass
+class ElementResults:
+    """Per-element results over one period of a solution (ne elements, nt samples).
+
+    Attributes:
+        status: (ne,) 0 stuck, 1 stick–slip, 2 gross slip (slipping >= 90 % of the cycle),
+            3 partly open, 4 open.
+        energy: (ne,) energy dissipated per cycle, N·mm (work of the retained force harmonics,
+            the quantity that balances the input power in the HBM).
+        mean_normal: (ne,) cycle-mean normal force N(t), N.
+        slip_fraction: (ne,) fraction of the samples spent slipping.
+        u_t: (ne, 2, nt) tangential relative displacement, mm.
+        T: (ne, 2, nt) tangential force, N.
+        N: (ne, nt) total normal force, N.
+        time: (nt,) sample times over one period, s.
+    """
+
+    status: np.ndarray
+    energy: np.ndarray
+    mean_normal: np.ndarray
+    slip_fraction: np.ndarray
+    u_t: np.ndarray
+    T: np.ndarray
+    N: np.ndarray
+    time: np.ndarray
+
+
+def _contact_operator(dofs: np.ndarray, n: int) -> sp.csr_matrix:
+    ne = dofs.shape[0]
+    rows, cols, vals = [], [], []
+    for body, sign in ((0, 1.0), (1, -1.0)):
+        d = dofs[:, body, :].ravel()
+        r = np.arange(3 * ne)
+        keep = d >= 0
+        rows.append(r[keep]); cols.append(d[keep]); vals.append(np.full(keep.sum(), sign))
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(3 * ne, n))
+
+
+class HarmonicBalance:
+    """Harmonic balance solver for ``s`` with friction contacts ``c``.
+
+    Args:
+        s: the linear structure.
+        c: the friction contacts (DOF indices must be < s.n).
+        harmonics: highest harmonic H (0..H are kept).
+        samples: AFT time samples per period.
+        tol: Newton tolerance on ||R|| relative to the response norm.
+        max_iter: Newton iteration limit.
+        dense_limit: largest reduced system size factorized directly (else GMRES).
+    """
+
+    def __init__(self, s: LinearStructure, c: FrictionContacts, harmonics: int = 3,
+                 samples: int = 128, tol: float = 1e-9, max_iter: int = 40,
+                 dense_limit: int = 1500) -> None:
+        if not isinstance(s, LinearStructure) or not isinstance(c, FrictionContacts):
+            raise ValueError("HarmonicBalance(s, c): s must be a LinearStructure and c FrictionContacts")
+        c.check_dofs(s.n)
+        if not (0 < tol < 1):
+            raise ValueError(f"tol must be in (0, 1), got {tol}")
+        self.s, self.c = s, c
+        self.fourier = Fourier(harmonics, samples)
+        self.H, self.nH = self.fourier.H, self.fourier.nH
+        self.tol, self.max_iter, self.dense_limit = float(tol), int(max_iter), int(dense_limit)
+        self.B = _contact_operator(c.dofs, s.n)
+        self.k0 = c.base_stiffness().ravel()
+        self.G = Receptance(s, self.B, self.k0)
+        self.ne, self.nc = c.ne, 3 * c.ne
+        self._pre = None          # cached preconditioner (GMRES path)
+        self.stats = {"residuals": 0, "linear_solves": 0, "gmres_iterations": 0}
+
+    # ------------------------------------------------------------------ layouts
+    def _to_el(self, U: np.ndarray) -> np.ndarray:
+        return U.reshape(self.nH, self.ne, 3).transpose(1, 2, 0)
+
+    def _from_el(self, X: np.ndarray) -> np.ndarray:
+        return X.transpose(2, 0, 1).reshape(self.nH, -1)
+
+    def _check_force(self, force) -> np.ndarray:
+        f = np.asarray(force, dtype=float)
+        if f.shape != (self.s.n,):
+            raise ValueError(f"force must have shape ({self.s.n},), got {f.shape}")
+        if not np.all(np.isfinite(f)):
+            raise ValueError("force must be finite")
+        return f
+
+    @staticmethod
+    def _check_omega(omega) -> float:
+        if not np.isfinite(omega) or omega <= 0:
+            raise ValueError(f"omega must be a finite frequency > 0 rad/s, got {omega!r}")
+        return float(omega)
+
+    # ------------------------------------------------------------------ linear operators
+    def ulin(self, omega: float, force: np.ndarray) -> np.ndarray:
+        """Contact response (n_H, n_c) of the linear base to force·cos(wt)."""
+        U = np.zeros((self.nH, self.nc))
+        u = self.G.force_response(1, omega, force.astype(complex))
+        U[1], U[2] = u.real, -u.imag
+        return U
+
+    def gapply(self, omega: float, g: np.ndarray) -> np.ndarray:
+        """Receptance times correction-force harmonics, (n_H, n_c) -> (n_H, n_c)."""
+        out = np.empty_like(g)
+        out[0] = self.G.apply(0, omega, g[0].astype(complex)).real
+        if self.H:
+            cpl = (g[1::2] - 1j * g[2::2]).T                   # (nc, H)
+            Psi = self.G.Psi
+            PtC = Psi.T @ cpl                                  # (m, H)
+            mod = np.empty_like(PtC)
+            for h in range(1, self.H + 1):
+                L = self.G.modal(h, omega)
+                mod[:, h - 1] = L * PtC[:, h - 1] if L.ndim == 1 else L @ PtC[:, h - 1]
+            u = Psi @ mod + self.G.R @ cpl
+            out[1::2], out[2::2] = u.real.T, -u.imag.T
+        return out
+
+    # ------------------------------------------------------------------ residual
+    def residual(self, U: np.ndarray, omega: float, Ul: np.ndarray, jacobian: bool = True):
+        """R = U - U_lin + G g(U); returns R, g, nonlinear element indices, their dg/dU blocks."""
+        self.stats["residuals"] += 1
+        F, nl, DF = self.c.evaluate(self._to_el(U), self.fourier, jacobian)
+        g = self._from_el(F) - self.k0[None, :] * U
+        R = U - Ul + self.gapply(omega, g)
+        Dg = None
+        if jacobian and nl.size:
+            Dg = DF
+            nH = self.nH
+            k0 = self.k0.reshape(self.ne, 3)[nl]               # (k, 3)
+            diag = np.repeat(k0, nH, axis=1)                   # element layout d*nH + h
+            i = np.arange(3 * nH)
+            Dg[:, i, i] -= diag
+        return R, g, nl, Dg
+
+    def r_omega(self, omega: float, force: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """dR/dw at fixed U (central difference of the linear operators only, no AFT)."""
+        eps = 1e-6 * omega
+        rp = -self.ulin(omega + eps, force) + self.gapply(omega + eps, g)
+        rm = -self.ulin(omega - eps, force) + self.gapply(omega - eps, g)
+        return (rp - rm) / (2 * eps)
+
+    # ------------------------------------------------------------------ linear solve
+    def _elidx(self, k: int) -> np.ndarray:
+        """Reduced-layout index (h * 3k + 3e + d) of element-layout entry (e, d*nH + h)."""
+        nH = self.nH
+        e = np.arange(k)[:, None, None]
+        d = np.arange(3)[None, :, None]
+        h = np.arange(nH)[None, None, :]
+        return (h * 3 * k + 3 * e + d).reshape(k, 3 * nH)
+
+    def _gbig(self, omega: float, cn: np.ndarray) -> np.ndarray:
+        """Real harmonic-block receptance restricted to contact coordinates cn."""
+        p = cn.size
+        nH = self.nH
+        G = np.zeros((nH * p, nH * p))
+        G[:p, :p] = self.G.matrix(0, omega, cn, cn).real
+        for h in range(1, self.H + 1):
+            Gh = self.G.matrix(h, omega, cn, cn)
+            a, b = (2 * h - 1) * p, 2 * h * p
+            G[a:a + p, a:a + p] = Gh.real
+            G[a:a + p, b:b + p] = Gh.imag
+            G[b:b + p, a:a + p] = -Gh.imag
+            G[b:b + p, b:b + p] = Gh.real
+        return G
+
+    def linsolve(self, omega: float, nl: np.ndarray, Dg, rhs: list[np.ndarray]) -> list[np.ndarray]:
+        """Solve J x = rhs (each (n_H, n_c)) with J = I + G dg/dU, reduced on the nonlinear elements."""
+        self.stats["linear_solves"] += 1
+        k = nl.size
+        if k == 0:
+            return [r.copy() for r in rhs]
+        nH = self.nH
+        cn = (3 * nl[:, None] + np.arange(3)).ravel()
+        P = nH * cn.size
+        idx = self._elidx(k)
+        B = np.stack([r[:, cn].ravel() for r in rhs], axis=1)   # (P, nrhs) reduced layout
+        if P <= self.dense_limit:
+            Gb = self._gbig(omega, cn)
+            J = np.eye(P)
+            J[:, idx] += np.einsum("pkx,kxy->pky", Gb[:, idx], Dg)
+            X = sla.lu_solve(sla.lu_factor(J, check_finite=False), B, check_finite=False)
+        else:
+            X = self._gmres(omega, nl, cn, idx, Dg, B)
+        out = []
+        for i, r in enumerate(rhs):
+            xe = X[:, i][idx]                                   # (k, 3 nH) element layout
+            ge = np.einsum("kxy,ky->kx", Dg, xe)
+            gfull = np.zeros((nH, self.nc))
+            gfull[:, cn] = self._from_el(ge.reshape(k, 3, nH))
+            out.append(r - self.gapply(omega, gfull))
+        return out
+
+    # ------------------------------------------------------------------ GMRES path
+    def _gmres(self, omega, nl, cn, idx, Dg, B):
+        k, nH, p = nl.size, self.nH, cn.size
+        P = nH * p
+        Psi = self.G.Psi[cn]
+        R = self.G.R[np.ix_(cn, cn)]
+        G = self.G
+
+        def gapply_red(v):                                    # v (nH, p) real
+            out = np.empty_like(v)
+            out[0] = (Psi @ (G.modal(0, omega) * (Psi.T @ v[0])).real
+                      if G.diag_damping else Psi @ (G.modal(0, omega) @ (Psi.T @ v[0])).real) + R @ v[0]
+            cpl = v[1::2] - 1j * v[2::2]
+            PtC = Psi.T @ cpl.T
+            for h in range(1, self.H + 1):
+                L = G.modal(h, omega)
+                PtC[:, h - 1] = L * PtC[:, h - 1] if L.ndim == 1 else L @ PtC[:, h - 1]
+            u = Psi @ PtC + R @ cpl.T
+            out[1::2], out[2::2] = u.real.T, -u.imag.T
+            return out
+
+        def matvec(x):
+            xe = x[idx]
+            ge = np.einsum("kxy,ky->kx", Dg, xe)
+            gv = np.empty(P)
+            gv[idx] = ge
+            return x + gapply_red(gv.reshape(nH, p)).ravel()
+
+        # harmonic-averaged element stiffness (3x3 per element) from the diagonal harmonic blocks
+        Dh = Dg.reshape(k, 3, nH, 3, nH)
+        hh = np.arange(1, nH)
+        kbar = Dh[:, :, hh, :, hh].mean(axis=0) if nH > 1 else Dh[:, :, 0, :, 0]
+        Kb = np.zeros((p, p))
+        blk = (3 * np.arange(k)[:, None] + np.arange(3)).ravel()
+        rr = blk.reshape(k, 3)
+        Kb[rr[:, :, None], rr[:, None, :]] = kbar
+        A = np.eye(p) + R @ Kb
+        lu = sla.lu_factor(A, check_finite=False)
+        AinvU = sla.lu_solve(lu, Psi, check_finite=False)      # (p, m)
+        VtAU = (Psi.T @ Kb) @ AinvU                            # (m, m)
+        VtK = Psi.T @ Kb
+        small = {}
+        for h in range(0, self.H + 1):
+            L = G.modal(h, omega)
+            Lm = np.diag(L) if L.ndim == 1 else L
+            if h == 0:
+                keep = ~G.rigid
+                Li = np.zeros_like(Lm)
+                # Woodbury in the elastic subspace only (rigid modes do not act at h = 0)
+                S = np.eye(Lm.shape[0], dtype=complex)
+                S[np.ix_(keep, keep)] = np.eye(keep.sum()) + Lm[np.ix_(keep, keep)] @ VtAU[np.ix_(keep, keep)]
+                small[h] = (S, Lm)
+            else:
+                small[h] = (np.eye(Lm.shape[0]) + Lm @ VtAU, Lm)
+        facs = {h: (sla.lu_factor(S, check_finite=False), Lm) for h, (S, Lm) in small.items()}
+
+        def prec(x):
+            v = x.reshape(nH, p)
+            out = np.empty_like(v)
+            y = sla.lu_solve(lu, v.T, check_finite=False)      # (p, nH): A^-1 on all harmonic rows
+            for h in range(self.H + 1):
+                f, Lm = facs[h]
+                if h == 0:
+                    yh = y[:, 0].astype(complex)
+                else:
+                    yh = y[:, 2 * h - 1] - 1j * y[:, 2 * h]
+                # (A + Psi L V^T)^-1 = A^-1 - A^-1 Psi (I + L V^T A^-1 Psi)^-1 L V^T A^-1
+                z = yh - AinvU @ sla.lu_solve(f, Lm @ (VtK @ yh), check_finite=False)
+                if h == 0:
+                    out[0] = z.real
+                else:
+                    out[2 * h - 1], out[2 * h] = z.real, -z.imag
+            return out.ravel()
+
+        Aop = spla.LinearOperator((P, P), matvec=matvec)
+        Mop = spla.LinearOperator((P, P), matvec=prec)
+        X = np.empty_like(B)
+        for i in range(B.shape[1]):
+            it = [0]
+
+            def cb(_):
+                it[0] += 1
+            x, info = spla.gmres(Aop, B[:, i], M=Mop, tol=1e-10, atol=0.0, restart=200,
+                                 maxiter=5, callback=cb, callback_type="pr_norm")
+            self.stats["gmres_iterations"] += it[0]
+            if info != 0:
+                res = np.linalg.norm(matvec(x) - B[:, i]) / max(np.linalg.norm(B[:, i]), 1e-300)
+                if not np.isfinite(res) or res > 1e-6:
+                    raise ConvergenceError("GMRES did not converge on the reduced Newton system", res)
+            X[:, i] = x
+        return X
+
+    # ------------------------------------------------------------------ Newton
+    def _scale(self, U, Ul):
+        return max(np.linalg.norm(U), np.linalg.norm(Ul), 1e-300)
+
+    def newton(self, omega: float, force: np.ndarray, U0: np.ndarray):
+        """Damped Newton at fixed omega from U0; returns (U, residual, iterations)."""
+        Ul = self.ulin(omega, force)
+        U = U0.copy()
+        R, g, nl, Dg = self.residual(U, omega, Ul)
+        r = np.linalg.norm(R)
+        for it in range(1, self.max_iter + 1):
+            if r <= self.tol * self._scale(U, Ul):
+                self._last = (g, (nl, Dg))
+                return U, r / self._scale(U, Ul), it - 1, nl.size
+            (dU,) = self.linsolve(omega, nl, Dg, [-R])
+            alpha = 1.0
+            for _ in range(10):
+                Ut = U + alpha * dU
+                Rt, gt, nlt, Dgt = self.residual(Ut, omega, Ul)
+                rt = np.linalg.norm(Rt)
+                if rt <= (1 - 1e-4 * alpha) * r:
+                    break
+                alpha *= 0.5
+            U, R, g, nl, Dg, r = Ut, Rt, gt, nlt, Dgt, rt
+        if r <= self.tol * self._scale(U, Ul):
+            self._last = (g, (nl, Dg))
+            return U, r / self._scale(U, Ul), self.max_iter, nl.size
+        raise ConvergenceError(f"Newton did not converge at omega = {omega:.6g} rad/s in "
+                               f"{self.max_iter} iterations", r / self._scale(U, Ul))
+
+    def make_solution(self, omega: float, force: np.ndarray, U: np.ndarray, res: float,
+                      it: int, nnl: int, g: np.ndarray | None = None, jac=None) -> Solution:
+        """Recover all structure DOFs from the contact harmonics (g: correction forces if known)."""
+        if g is None:
+            F, _, _ = self.c.evaluate(self._to_el(U), self.fourier, jacobian=False)
+            g = self._from_el(F) - self.k0[None, :] * U
+        y = -(self.B.T @ g.T).T                                 # (nH, n) forces on the structure
+        y[1] += force
+        q = np.zeros((self.nH, self.s.n))
+        q[0] = self.G.response_full(0, omega, y[0].astype(complex)).real
+        for h in range(1, self.H + 1):
+            z = self.G.response_full(h, omega, y[2 * h - 1] - 1j * y[2 * h])
+            q[2 * h - 1], q[2 * h] = z.real, -z.imag
+        sol = Solution(omega, q, self._to_el(U).copy(), res, it, nnl)
+        sol._jac = jac
+        return sol
+
+    def solve(self, omega: float, force, guess: Solution | None = None) -> Solution:
+        """Periodic response to force·cos(omega t).
+
+        Args:
+            omega: excitation frequency, rad/s (> 0).
+            force: (n,) force amplitude per DOF, N.
+            guess: optional starting solution (default: the linear-base response).
+
+        Returns:
+            Solution (raises ConvergenceError if Newton fails).
+        """
+        omega = self._check_omega(omega)
+        force = self._check_force(force)
+        U0 = self.ulin(omega, force) if guess is None else self._from_el(guess.contact)
+        U, res, it, nnl = self.newton(omega, force, U0)
+        g, jac = self._last
+        return self.make_solution(omega, force, U, res, it, nnl, g=g, jac=jac)
+
+    # ------------------------------------------------------------------ post-processing
+    def element_results(self, sol: Solution) -> ElementResults:
+        """Per-element status, dissipated energy, mean normal load and load histories at ``sol``."""
+        U = sol.contact
+        F, _, _ = self.c.evaluate(U, self.fourier, jacobian=False)
+        hist = self.c.histories(U, self.fourier)
+        h = self.fourier.orders[1::2]
+        # W = Int f . du = pi Sum_h h (b_u a_f - a_u b_f)
+        W = np.pi * np.sum(h * (U[:, :, 2::2] * F[:, :, 1::2] - U[:, :, 1::2] * F[:, :, 2::2]), axis=(1, 2))
+        t = self.fourier.theta / sol.omega
+        return ElementResults(hist["status"], W, hist["N"].mean(axis=1), hist["slip_fraction"],
+                              hist["u_t"], hist["T"], hist["N"], t)
+
+    def frf(self, omega_start: float, omega_end: float, force, dof: int, **kw):
+        """Frequency response by pseudo-arc-length continuation; see ``continuation.continue_frf``."""
+        from .continuation import continue_frf
+        return continue_frf(self, omega_start, omega_end, force, dof, **kw)

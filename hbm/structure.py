@@ -1,0 +1,174 @@
+"""Linear structure and its receptance in contact (relative) coordinates.
+
+The receptance is written about a *linear base*: the structure plus the stuck stiffness of every
+contact element that is closed at rest (``K~ = K + B^T diag(k0) B``). Its low modes are computed
+once (dense generalized ``eigh`` of (K~, M), lowest ``n_modes`` pairs) and the contribution of
+the discarded modes is kept as static residual flexibility, so that
+
+    G(h w) = Psi (Omega^2 - (h w)^2 + i h w C_m)^-1 Psi^T + R,        Psi = B Phi
+
+is exact at h w = 0 and accurate below the cut-off. Rigid-body modes (free-free structures) are
+detected by their zero eigenvalue; they enter the dynamic harmonics (h >= 1) through the modal sum
+and are removed from the static one (h = 0): the 0th harmonic only sees self-equilibrated contact
+forces, so the flexibility with the rigid-body modes removed is used,
+``G_el = (K~ + s M Phi_r Phi_r^T M)^-1 - Phi_r Phi_r^T / s``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+
+
+def _check_square(name: str, A, n: int | None) -> np.ndarray:
+    A = np.asarray(A.toarray() if sp.issparse(A) else A, dtype=float)
+    if A.ndim != 2 or A.shape[0] != A.shape[1] or (n is not None and A.shape[0] != n):
+        want = f"({n}, {n})" if n is not None else "square"
+        raise ValueError(f"{name} must be a {want} matrix, got shape {A.shape}")
+    if not np.all(np.isfinite(A)):
+        raise ValueError(f"{name} must be finite (no NaN/inf)")
+    if not np.allclose(A, A.T, rtol=1e-10, atol=1e-12 * max(np.abs(A).max(), 1e-300)):
+        raise ValueError(f"{name} must be symmetric")
+    return 0.5 * (A + A.T)
+
+
+class LinearStructure:
+    """Linear structure M q'' + C q' + K q = f (units tonne, N/mm, N·s/mm).
+
+    Args:
+        M: mass matrix (n, n), symmetric positive definite.
+        K: stiffness matrix (n, n), symmetric positive semi-definite (free–free allowed).
+        C: viscous damping matrix (n, n), optional.
+        damping_ratio: modal damping ratio applied to the modes of the linear base (the structure
+            with the contacts closed at rest stuck, i.e. the low-amplitude assembled structure),
+            an alternative to C; at most one of C / damping_ratio.
+        n_modes: number of modes kept in the receptance (the rest is static residual
+            flexibility). Default: all if n <= 300, else 60.
+    """
+
+    def __init__(self, M, K, C=None, damping_ratio: float | None = None,
+                 n_modes: int | None = None) -> None:
+        self.M = _check_square("M", M, None)
+        n = self.M.shape[0]
+        self.n = n
+        self.K = _check_square("K", K, n)
+        if C is not None and damping_ratio is not None:
+            raise ValueError("give either C or damping_ratio, not both")
+        self.C = None if C is None else _check_square("C", C, n)
+        if damping_ratio is not None:
+            if not np.isfinite(damping_ratio) or not (0.0 <= damping_ratio < 1.0):
+                raise ValueError(f"damping_ratio must be in [0, 1), got {damping_ratio!r}")
+        self.damping_ratio = damping_ratio
+        if n_modes is None:
+            n_modes = n if n <= 300 else 60
+        if int(n_modes) != n_modes or not (1 <= n_modes <= n):
+            raise ValueError(f"n_modes must be an integer in [1, {n}], got {n_modes!r}")
+        self.n_modes = int(n_modes)
+        try:
+            np.linalg.cholesky(self.M)
+        except np.linalg.LinAlgError:
+            raise ValueError("M must be positive definite") from None
+
+
+class Receptance:
+    """Receptance of the linear base in contact coordinates u = B q (see module docstring).
+
+    Args:
+        s: the linear structure.
+        B: sparse (nc, n) map from structure DOFs to contact relative coordinates.
+        k0: (nc,) stiffness of the linear base at each contact coordinate, N/mm.
+    """
+
+    def __init__(self, s: LinearStructure, B: sp.csr_matrix, k0: np.ndarray) -> None:
+        self.s = s
+        self.B = B
+        n, m = s.n, s.n_modes
+        Kb = s.K + (B.T @ sp.diags(k0) @ B).toarray()
+        lam, Phi = sla.eigh(Kb, s.M, subset_by_index=[0, m - 1])
+        scale = max(np.max(np.diag(Kb) / np.diag(s.M)), 1e-300)
+        rigid = lam < 1e-9 * scale
+        lam = np.where(rigid, 0.0, lam)
+        self.lam, self.Phi, self.rigid = lam, Phi, rigid
+        self.Kb = Kb
+        if s.C is not None:
+            Cm = Phi.T @ s.C @ Phi
+        elif s.damping_ratio is not None:
+            Cm = np.diag(2.0 * s.damping_ratio * np.sqrt(lam))
+        else:
+            Cm = np.zeros((m, m))
+        off = Cm - np.diag(np.diag(Cm))
+        self.diag_damping = not np.any(np.abs(off) > 1e-12 * max(np.abs(Cm).max(), 1e-300))
+        self.Cm = Cm
+        self.cvec = np.diag(Cm).copy()
+        self.Psi = np.asarray(B @ Phi)                       # (nc, m)
+        self.complete = m == n
+        el = ~rigid
+        self.sigma = lam[el][0] if el.any() else scale
+        if self.complete:
+            self.R = np.zeros((B.shape[0], B.shape[0]))
+            self._chol = None
+        else:
+            Pr = s.M @ Phi[:, rigid]
+            self._chol = sla.cho_factor(Kb + self.sigma * Pr @ Pr.T)
+            X = sla.cho_solve(self._chol, B.T.toarray())    # (n, nc)
+            Gel = np.asarray(B @ X) - self.Psi[:, rigid] @ self.Psi[:, rigid].T / self.sigma
+            Pe = self.Psi[:, el]
+            self.R = Gel - (Pe / lam[el]) @ Pe.T
+            self.R = 0.5 * (self.R + self.R.T)
+
+    # ------------------------------------------------------------------ modal factors
+    def modal(self, h: int, omega: float) -> np.ndarray:
+        """Modal receptance Lambda_h (m,) if diagonal damping else (m, m), complex; h = 0 drops rigid modes."""
+        lam = self.lam
+        if h == 0:
+            out = np.where(self.rigid, 0.0, 1.0 / np.where(self.rigid, 1.0, lam))
+            return out.astype(complex) if self.diag_damping else np.diag(out).astype(complex)
+        w = h * omega
+        if self.diag_damping:
+            return 1.0 / (lam - w * w + 1j * w * self.cvec)
+        return np.linalg.inv(np.diag(lam - w * w) + 1j * w * self.Cm)
+
+    def _mul(self, L: np.ndarray, X: np.ndarray) -> np.ndarray:
+        if L.ndim == 1:
+            return L[:, None] * X if X.ndim == 2 else L * X
+        return L @ X
+
+    def matrix(self, h: int, omega: float, rows=None, cols=None) -> np.ndarray:
+        """Dense receptance block G_h[rows, cols] (complex), mm/N."""
+        Pr = self.Psi if rows is None else self.Psi[rows]
+        Pc = self.Psi if cols is None else self.Psi[cols]
+        R = self.R if rows is None and cols is None else self.R[np.ix_(
+            np.arange(self.R.shape[0]) if rows is None else rows,
+            np.arange(self.R.shape[0]) if cols is None else cols)]
+        return Pr @ self._mul(self.modal(h, omega), Pc.T) + R
+
+    def apply(self, h: int, omega: float, c: np.ndarray) -> np.ndarray:
+        """G_h c for complex contact forces c (nc,) or (nc, k)."""
+        return self.Psi @ self._mul(self.modal(h, omega), self.Psi.T @ c) + self.R @ c
+
+    def force_response(self, h: int, omega: float, f: np.ndarray):
+        """Modal participation of an external force: returns (u_contact, None) with u = B H_h f."""
+        L = self.modal(h, omega)
+        u = self.Psi @ self._mul(L, self.Phi.T @ f)
+        if not self.complete:
+            u = u + self.B @ self.residual_full(f)
+        return u
+
+    def residual_full(self, y: np.ndarray) -> np.ndarray:
+        """Static response of the discarded modes to forces y (n,) or (n, k): Sum_discarded phi phi^T y / lam."""
+        if self.complete:
+            return np.zeros_like(y)
+        rigid, el = self.rigid, ~self.rigid
+        Phi = self.Phi
+        x = sla.cho_solve(self._chol, y)
+        x = x - Phi[:, rigid] @ (Phi[:, rigid].T @ y) / self.sigma
+        x = x - Phi[:, el] @ ((Phi[:, el].T @ y) / (self.lam[el][:, None] if y.ndim == 2 else self.lam[el]))
+        return x
+
+    def response_full(self, h: int, omega: float, y: np.ndarray) -> np.ndarray:
+        """Structure displacement harmonic q_h = H_h y for complex forces y (n,)."""
+        L = self.modal(h, omega)
+        q = self.Phi @ self._mul(L, self.Phi.T @ y)
+        if not self.complete:
+            q = q + self.residual_full(y.real) + 1j * self.residual_full(y.imag)
+        return q
