@@ -122,7 +122,7 @@ def _node_to_block(V: dolfinx.fem.FunctionSpace) -> np.ndarray:
     """Local block index of the dof at each local geometry node (-1 if V has no dof there)."""
     mesh = V.mesh
     gdm = mesh.geometry.dofmap
-    nn = gdm.num_links(0)
+    nn = gdm.links(0).size
     g = gdm.array.reshape(-1, nn)
     nd = V.dofmap.cell_dofs(0).size
     v = V.dofmap.list.array.reshape(-1, nd)
@@ -177,7 +177,9 @@ def original_node_dofs(V: dolfinx.fem.FunctionSpace, original_nodes: np.ndarray,
 
 def _volumes(fe: ResonatorFE) -> dict[str, float]:
     """Volume per marker and total from dolfinx forms, mm³ (collective)."""
-    dx = ufl.Measure("dx", domain=fe.mesh, subdomain_data=fe.cell_tags)
+    # det J of a P2 map is cubic: degree 3 integrates curved cells exactly (the default is lower)
+    dx = ufl.Measure("dx", domain=fe.mesh, subdomain_data=fe.cell_tags,
+                     metadata={"quadrature_degree": 3})
     one = dolfinx.fem.Constant(fe.mesh, 1.0)
     out = {}
     for m, name in MARKER_NAMES.items():

@@ -467,6 +467,48 @@ def _p2_triangle_areas(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
     return area
 
 
+# gmsh tet10 node order: v0..v3, then the mid-edge nodes of edges 01, 12, 20, 30, 32, 31
+_TET10_EDGES = ((0, 1), (1, 2), (2, 0), (3, 0), (3, 2), (3, 1))
+_DLAMBDA = np.array([[-1, -1, -1], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+
+
+def _tet10_grad(r: float, s: float, t: float) -> np.ndarray:
+    """(10, 3) reference gradients of the gmsh-ordered P2 tet shape functions at (r, s, t)."""
+    lam = np.array([1 - r - s - t, r, s, t])
+    dn = np.zeros((10, 3))
+    for i in range(4):
+        dn[i] = (4 * lam[i] - 1) * _DLAMBDA[i]
+    for k, (i, j) in enumerate(_TET10_EDGES):
+        dn[4 + k] = 4 * (lam[i] * _DLAMBDA[j] + lam[j] * _DLAMBDA[i])
+    return dn
+
+
+def scaled_jacobian(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Minimum over the 10 nodes and the centroid of det J / det J_straight for tet10 cells.
+
+    1 for straight cells; <= 0 means the curved cell is (partly) inverted and unusable.
+
+    Args:
+        points: (n_nodes, 3) coordinates, mm.
+        cells: (n_cells, 10) gmsh tet10 (tet4 cells return ones).
+
+    Returns:
+        (n_cells,) float64.
+    """
+    if cells.shape[1] == 4:
+        return np.ones(len(cells))
+    xe = points[cells]
+    d = xe[:, 1:4] - xe[:, :1]
+    lin = np.einsum("ni,ni->n", np.cross(d[:, 0], d[:, 1]), d[:, 2])
+    ref = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (.5, 0, 0), (.5, .5, 0), (0, .5, 0),
+           (0, 0, .5), (0, .5, .5), (.5, 0, .5), (.25, .25, .25)]
+    out = np.full(len(cells), np.inf)
+    for r, s_, t in ref:
+        jac = np.einsum("kd,nke->ned", _tet10_grad(r, s_, t), xe)
+        out = np.minimum(out, np.linalg.det(jac) / lin)
+    return out
+
+
 def cell_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     """Volumes of tet4 / tet10 cells (gmsh ordering), mm³.
 
@@ -490,18 +532,8 @@ def cell_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     qp = [(0.25, 0.25, 0.25, -4 / 5), (a, a, a, 9 / 20), (b, a, a, 9 / 20), (a, b, a, 9 / 20),
           (a, a, b, 9 / 20)]
     vol = np.zeros(len(cells))
-    # gmsh tet10 node order: v0..v3, then edges 01, 12, 20, 30, 32, 31
-    edges = [(0, 1), (1, 2), (2, 0), (3, 0), (3, 2), (3, 1)]
     for r, s_, t, w in qp:
-        lam = np.array([1 - r - s_ - t, r, s_, t])
-        dlam = np.array([[-1, -1, -1], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
-        # dN/d(r,s,t): vertices 4λ-1, edges 4λiλj
-        dn = np.zeros((10, 3))
-        for i in range(4):
-            dn[i] = (4 * lam[i] - 1) * dlam[i]
-        for k, (i, j) in enumerate(edges):
-            dn[4 + k] = 4 * (lam[i] * dlam[j] + lam[j] * dlam[i])
-        jac = np.einsum("kd,nke->ned", dn, xe)  # (n, 3 phys, 3 ref)
+        jac = np.einsum("kd,nke->ned", _tet10_grad(r, s_, t), xe)  # (n, 3 phys, 3 ref)
         vol += w * np.linalg.det(jac) / 6.0
     return vol
 
@@ -554,8 +586,15 @@ def build_resonator(params: ResonatorParams, verbose: bool = False) -> Resonator
         gmsh.model.mesh.generate(3)
         if params.order == 2:
             gmsh.model.mesh.setOrder(2)
+            # thin features (0.25 mm shank/hole clearance annuli under the head and on the nut)
+            # give P2 cells with negative Jacobians when curved; the elastic analogy fixes them
+            gmsh.model.mesh.optimize("HighOrderElastic")
         data = _extract(gmsh, params, info)
         gmsh.model.remove()
+        q = scaled_jacobian(data.points, data.cells)
+        if q.min() <= 0:
+            raise GeometryError(f"{int((q <= 0).sum())} curved cells have a non-positive Jacobian "
+                                f"(min scaled Jacobian {q.min():.3f}); reduce hole_mesh_size")
     finally:
         gmsh.finalize()
     data.build_time = time.perf_counter() - t0
