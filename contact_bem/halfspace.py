@@ -1,0 +1,260 @@
+"""Elastic half-space operators for two identical bodies, applied by FFT.
+
+Influence coefficients of a uniform traction on one rectangular cell (half sides a = dx/2,
+b = dy/2), from the closed-form integrals of Love (1929) / Johnson (1985, §3.2 and §3.6):
+
+* normal (Boussinesq), relative normal displacement of the two bodies
+  ``K_zz = 1/(π E*) · D[X asinh(Y/|X|) + Y asinh(X/|Y|)]``,
+* tangential (Cerruti), relative tangential displacement,
+  ``K_xx = 1/(π G) · D[(1-ν) X asinh(Y/|X|) + Y asinh(X/|Y|)]``,
+  ``K_yy = 1/(π G) · D[X asinh(Y/|X|) + (1-ν) Y asinh(X/|Y|)]``,
+  ``K_xy = ν/(π G) · D[-√(X²+Y²)]``,
+
+where ``D[f] = f(x+a, y+b) - f(x-a, y+b) - f(x+a, y-b) + f(x-a, y-b)`` and E* = E/(2(1-ν²)) is the
+composite modulus of two identical bodies. The factors include both bodies' compliances, so the
+tangential stiffness of a stuck circle is 8 G* a with G* = G/(2(2-ν)). Because the bodies are identical
+(Dundurs β = 0) the normal and tangential problems are uncoupled.
+
+Non-periodic grids use DC-FFT (Liu, Wang & Liu 2000): the kernel is sampled on a (2nx, 2ny) wrapped
+grid and the field zero-padded, which gives the exact linear (non-circular) convolution.
+Periodic grids use the exact Fourier multipliers of the continuous half-space,
+``2/(E*|k|)`` and ``(2/(G|k|)) (δ_αβ - ν k_α k_β/|k|²)``, with the k = 0 term set to zero (the mean
+displacement of a periodic problem is undefined; only relative values matter).
+
+FFTs use pyFFTW with plans built once per array shape and reused (threads configurable); without
+pyFFTW it falls back to ``scipy.fft`` with the same number of workers.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import finite_array, positive_scalar
+from .grid import Grid
+
+try:  # pyFFTW is the fast path; scipy.fft keeps the package usable without it
+    import pyfftw
+    _HAVE_FFTW = True
+except ImportError:  # pragma: no cover - exercised only without pyfftw
+    _HAVE_FFTW = False
+import scipy.fft as _sfft
+
+
+def _asinh_term(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """x·asinh(y/|x|), continuous and 0 at x = 0 (its mixed derivative is y²/r³)."""
+    ax = np.abs(x)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = x * np.arcsinh(y / np.where(ax > 0, ax, 1.0))
+    return np.where(ax > 0, out, 0.0)
+
+
+def _corner_sum(f, x: np.ndarray, y: np.ndarray, a: float, b: float) -> np.ndarray:
+    return f(x + a, y + b) - f(x - a, y + b) - f(x + a, y - b) + f(x - a, y - b)
+
+
+def influence_coefficients(x: np.ndarray, y: np.ndarray, dx: float, dy: float, young: float,
+                           poisson: float) -> dict[str, np.ndarray]:
+    """Relative displacements at offsets (x, y) due to a unit uniform traction on one cell.
+
+    Args:
+        x, y: offsets from the loaded cell centre (mm), any broadcastable shapes.
+        dx, dy: cell size (mm).
+        young: Young's modulus E (MPa) of each (identical) body.
+        poisson: Poisson ratio ν.
+
+    Returns:
+        dict with 'zz', 'xx', 'yy', 'xy' arrays (mm per MPa): relative displacement per unit traction.
+    """
+    a, b = 0.5 * dx, 0.5 * dy
+    e_star = young / (2.0 * (1.0 - poisson ** 2))
+    g = young / (2.0 * (1.0 + poisson))
+    t1 = _corner_sum(lambda u, v: _asinh_term(u, v), x, y, a, b)   # ∫∫ y²/r³
+    t2 = _corner_sum(lambda u, v: _asinh_term(v, u), x, y, a, b)   # ∫∫ x²/r³
+    tr = _corner_sum(lambda u, v: -np.hypot(u, v), x, y, a, b)     # ∫∫ xy/r³
+    return {
+        "zz": (t1 + t2) / (np.pi * e_star),
+        "xx": ((1.0 - poisson) * t1 + t2) / (np.pi * g),
+        "yy": (t1 + (1.0 - poisson) * t2) / (np.pi * g),
+        "xy": poisson * tr / (np.pi * g),
+    }
+
+
+class _FFT2:
+    """Real 2D FFT pair over the last two axes for one array shape, plans built once."""
+
+    def __init__(self, shape: tuple[int, ...], threads: int, effort: str):
+        self.shape = tuple(shape)
+        cshape = self.shape[:-1] + (self.shape[-1] // 2 + 1,)
+        if _HAVE_FFTW:
+            self.real_in = pyfftw.zeros_aligned(self.shape, dtype="float64")
+            self.spec = pyfftw.empty_aligned(cshape, dtype="complex128")
+            self.spec_in = pyfftw.empty_aligned(cshape, dtype="complex128")
+            self.real_out = pyfftw.empty_aligned(self.shape, dtype="float64")
+            self._fwd = pyfftw.FFTW(self.real_in, self.spec, axes=(-2, -1), threads=threads,
+                                    flags=(effort,))
+            self._inv = pyfftw.FFTW(self.spec_in, self.real_out, axes=(-2, -1), threads=threads,
+                                    direction="FFTW_BACKWARD", flags=(effort, "FFTW_DESTROY_INPUT"))
+            self.real_in[...] = 0.0  # planning with MEASURE may scribble on the buffers
+        else:  # pragma: no cover
+            self.real_in = np.zeros(self.shape)
+            self.threads = threads
+
+    def forward(self) -> np.ndarray:
+        """rfft2 of ``self.real_in`` (returns an internal buffer, valid until the next call)."""
+        if _HAVE_FFTW:
+            return self._fwd()
+        return _sfft.rfft2(self.real_in, workers=self.threads)  # pragma: no cover
+
+    def inverse(self, spec: np.ndarray) -> np.ndarray:
+        """irfft2 of ``spec`` (normalised; returns an internal buffer)."""
+        if _HAVE_FFTW:
+            self.spec_in[...] = spec
+            return self._inv()  # pyFFTW normalises the backward transform by default
+        return _sfft.irfft2(spec, s=self.shape[-2:], workers=self.threads)  # pragma: no cover
+
+
+class ElasticHalfSpace:
+    """Normal and tangential compliance operators of two identical elastic half-spaces on a grid.
+
+    Args:
+        grid: the contact grid.
+        young: Young's modulus E (MPa) of both bodies (> 0).
+        poisson: Poisson ratio ν in [0, 0.5).
+        periodic: periodic FFT (exact Fourier multipliers) instead of non-periodic DC-FFT.
+        threads: FFTW threads (>= 1).
+        planner: FFTW planner effort ('FFTW_ESTIMATE', 'FFTW_MEASURE', ...); plans are made once per
+            array shape (batch size) and reused.
+
+    Attributes:
+        e_star: composite modulus E/(2(1-ν²)) (MPa).
+        g_star: composite shear modulus G/(2(2-ν)) (MPa) of the Mindlin solution.
+        shear_modulus: G = E/(2(1+ν)) of one body (MPa).
+    """
+
+    def __init__(self, grid: Grid, young: float = 198400.0, poisson: float = 0.3, periodic: bool = False,
+                 threads: int = 1, planner: str = "FFTW_MEASURE"):
+        if not isinstance(grid, Grid):
+            raise ValueError(f"grid: expected a contact_bem.Grid, got {type(grid).__name__}")
+        self.grid = grid
+        self.young = positive_scalar("young", young)
+        self.poisson = float(poisson)
+        if not (np.isfinite(self.poisson) and 0.0 <= self.poisson < 0.5):
+            raise ValueError(f"poisson: must be in [0, 0.5), got {poisson!r}")
+        self.periodic = bool(periodic)
+        if int(threads) < 1:
+            raise ValueError(f"threads: must be >= 1, got {threads!r}")
+        self.threads = int(threads)
+        self.planner = str(planner)
+        nu = self.poisson
+        self.e_star = self.young / (2.0 * (1.0 - nu ** 2))
+        self.shear_modulus = self.young / (2.0 * (1.0 + nu))
+        self.g_star = self.shear_modulus / (2.0 * (2.0 - nu))
+        nx, ny = grid.shape
+        self.padded_shape = (nx, ny) if self.periodic else (2 * nx, 2 * ny)
+        self._plans: dict[tuple[int, ...], _FFT2] = {}
+        self._build_spectra()
+
+    # ------------------------------------------------------------------ kernels
+    def _build_spectra(self) -> None:
+        nx, ny = self.grid.shape
+        px, py = self.padded_shape
+        if self.periodic:
+            kx = 2 * np.pi * np.fft.fftfreq(nx, self.grid.dx)[:, None]
+            ky = 2 * np.pi * np.fft.rfftfreq(ny, self.grid.dy)[None, :]
+            k = np.hypot(kx, ky)
+            inv_k = np.divide(1.0, k, out=np.zeros_like(k), where=k > 0)
+            nu, g = self.poisson, self.shear_modulus
+            kx2 = kx ** 2 * inv_k ** 2
+            ky2 = ky ** 2 * inv_k ** 2
+            kxy = kx * ky * inv_k ** 2
+            self._zz = 2.0 / self.e_star * inv_k
+            self._xx = 2.0 / g * inv_k * (1.0 - nu * kx2)
+            self._yy = 2.0 / g * inv_k * (1.0 - nu * ky2)
+            self._xy = -2.0 / g * inv_k * nu * kxy
+        else:
+            ix = np.arange(px)
+            iy = np.arange(py)
+            ox = np.where(ix < nx, ix, ix - px) * self.grid.dx
+            oy = np.where(iy < ny, iy, iy - py) * self.grid.dy
+            c = influence_coefficients(ox[:, None], oy[None, :], self.grid.dx, self.grid.dy,
+                                       self.young, self.poisson)
+            self._zz = np.fft.rfft2(c["zz"])
+            self._xx = np.fft.rfft2(c["xx"])
+            self._yy = np.fft.rfft2(c["yy"])
+            self._xy = np.fft.rfft2(c["xy"])
+        # a real kernel spectrum keeps the products cheaper for the symmetric normal kernel
+        self._zz = np.ascontiguousarray(self._zz.real) if np.allclose(self._zz.imag, 0.0) else self._zz
+
+    def _plan(self, batch: tuple[int, ...]) -> _FFT2:
+        shape = tuple(batch) + self.padded_shape
+        plan = self._plans.get(shape)
+        if plan is None:
+            effort = self.planner if np.prod(shape) <= 2 ** 22 else "FFTW_ESTIMATE"
+            plan = _FFT2(shape, self.threads, effort)
+            self._plans[shape] = plan
+        return plan
+
+    # ------------------------------------------------------------------ operators
+    def displacement(self, pressure: np.ndarray) -> np.ndarray:
+        """Relative normal displacement u = K * p of the two bodies.
+
+        Args:
+            pressure: (..., nx, ny) pressure in MPa (leading axes are a batch).
+
+        Returns:
+            (..., nx, ny) displacement in mm (positive = the bodies are pushed apart).
+        """
+        p = np.asarray(pressure, dtype=float)
+        nx, ny = self.grid.shape
+        if p.shape[-2:] != (nx, ny):
+            raise ValueError(f"pressure: expected shape (..., {nx}, {ny}), got {p.shape}")
+        return self._apply_normal(p)
+
+    def _apply_normal(self, p: np.ndarray) -> np.ndarray:
+        nx, ny = self.grid.shape
+        plan = self._plan(p.shape[:-2])
+        plan.real_in[..., :nx, :ny] = p
+        spec = plan.forward()
+        spec *= self._zz
+        return plan.inverse(spec)[..., :nx, :ny].copy()
+
+    def tangential_displacement(self, traction: np.ndarray) -> np.ndarray:
+        """Relative tangential displacement u_α = K_αβ * q_β of the two bodies.
+
+        Args:
+            traction: (..., 2, nx, ny) shear traction (q_x, q_y) in MPa.
+
+        Returns:
+            (..., 2, nx, ny) tangential displacement in mm.
+        """
+        q = np.asarray(traction, dtype=float)
+        nx, ny = self.grid.shape
+        if q.shape[-3:] != (2, nx, ny):
+            raise ValueError(f"traction: expected shape (..., 2, {nx}, {ny}), got {q.shape}")
+        return self._apply_tangential(q)
+
+    def _apply_tangential(self, q: np.ndarray) -> np.ndarray:
+        nx, ny = self.grid.shape
+        plan = self._plan(q.shape[:-2])
+        plan.real_in[..., :nx, :ny] = q
+        s = plan.forward()
+        sx = s[..., 0, :, :].copy()
+        sy = s[..., 1, :, :]
+        out = np.empty_like(s)
+        out[..., 0, :, :] = self._xx * sx + self._xy * sy
+        out[..., 1, :, :] = self._xy * sx + self._yy * sy
+        return plan.inverse(out)[..., :nx, :ny].copy()
+
+    def kernel(self, component: str = "zz") -> np.ndarray:
+        """Real-space influence coefficients (non-periodic only) for inspection.
+
+        Args:
+            component: 'zz', 'xx', 'yy' or 'xy'.
+
+        Returns:
+            (nx, ny) relative displacement (mm/MPa) at offsets i·dx, j·dy from a loaded cell.
+        """
+        if component not in ("zz", "xx", "yy", "xy"):
+            raise ValueError(f"component: must be one of 'zz', 'xx', 'yy', 'xy', got {component!r}")
+        X, Y = np.meshgrid(np.arange(self.grid.shape[0]) * self.grid.dx,
+                           np.arange(self.grid.shape[1]) * self.grid.dy, indexing="ij")
+        return influence_coefficients(X, Y, self.grid.dx, self.grid.dy, self.young, self.poisson)[component]

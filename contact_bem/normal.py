@@ -1,0 +1,266 @@
+"""Normal rough contact: Polonsky–Keer constrained conjugate gradient (load or approach control).
+
+Problem (per grid cell i, cell area A): find the pressure p ≥ 0 and rigid approach δ with
+
+    g_i = h_i + (K*p)_i − δ ≥ 0,   p_i ≥ 0,   p_i g_i = 0,   A Σ p_i = W  (load control),
+
+where h is the initial separation, K the relative normal compliance of the two bodies and g the
+deformed gap. Polonsky & Keer (Wear 231, 1999) solve it by conjugate gradients restricted to the
+contact set, with projection on p ≥ 0, restart when cells enter the contact, and (in load control)
+the mean gap over the contact set as the approach.
+
+Stopping criterion (documented, checked on the iterate that the gap was computed from):
+
+    err = max( Σ_c p_i |g_i| / (Σ p_i · s),  max_{p_i = 0} max(−g_i, 0) / s,  |AΣp − W| / W ),
+
+i.e. the pressure-weighted gap on the contact set, the worst penetration outside it, and the load
+mismatch, with the displacement scale s = max(peak-to-peak of h on the allowed cells, max K*p).
+It stops when err < tol; reaching ``max_iter`` raises ConvergenceError with the err reached.
+
+Hardness cap: with ``hardness=H`` the pressure is clipped to H (perfectly plastic asperities);
+plastic cells leave the CG set and may interpenetrate (the interference is the plastic flattening).
+
+All internals are batched over a leading axis so that many small patches solve at once
+(``stiffness.patch_normal_stiffness``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ConvergenceError, finite_array, positive_scalar
+from .halfspace import ElasticHalfSpace
+
+_AX = (-2, -1)
+
+
+@dataclass
+class NormalSolution:
+    """Result of a normal contact solve.
+
+    Attributes:
+        pressure: (nx, ny) contact pressure in MPa (0 outside the contact and the mask).
+        gap: (nx, ny) deformed gap h + K*p − δ in mm (≈ 0 in contact, ≥ 0 elsewhere; masked-out
+            cells carry their unconstrained value).
+        displacement: (nx, ny) elastic relative normal displacement K*p in mm.
+        approach: rigid approach δ in mm (relative to the initial separation field).
+        load: total normal force A Σ p in N.
+        contact: (nx, ny) bool, cells with p > 0.
+        contact_fraction: contact area / allowed (masked) area.
+        iterations: CG iterations used.
+        residual: final error measure (see module docstring).
+        mask: (nx, ny) bool, cells allowed to carry pressure.
+        initial_gap: (nx, ny) the initial separation h in mm.
+        hardness: the pressure cap in MPa (inf = purely elastic).
+    """
+
+    pressure: np.ndarray
+    gap: np.ndarray
+    displacement: np.ndarray
+    approach: float
+    load: float
+    contact: np.ndarray
+    contact_fraction: float
+    iterations: int
+    residual: float
+    mask: np.ndarray
+    initial_gap: np.ndarray
+    hardness: float = float("inf")
+
+
+def _bsum(a: np.ndarray) -> np.ndarray:
+    return a.sum(axis=_AX, keepdims=True)
+
+
+def pk_normal_batch(apply_k, h: np.ndarray, allowed: np.ndarray, cell_area: float, *,
+                    load: np.ndarray | None = None, approach: np.ndarray | None = None,
+                    tol: float = 1e-8, max_iter: int = 2000, hardness: np.ndarray | None = None,
+                    p0: np.ndarray | None = None) -> dict:
+    """Batched Polonsky–Keer solve (internal; inputs already validated).
+
+    Args:
+        apply_k: callable (B, nx, ny) pressure → (B, nx, ny) displacement.
+        h: (B, nx, ny) initial separation (mm).
+        allowed: (B, nx, ny) bool, cells that may carry pressure.
+        cell_area: mm².
+        load: (B,) total loads N (load control) — exactly one of load / approach.
+        approach: (B,) rigid approaches mm (approach control).
+        tol: stopping tolerance on the error measure.
+        max_iter: iteration cap.
+        hardness: (B,) pressure caps MPa or None.
+        p0: optional (B, nx, ny) initial pressure (warm start).
+
+    Returns:
+        dict with pressure, displacement, gap, approach (B,), iterations (B,), residual (B,).
+
+    Raises:
+        ConvergenceError: if some batch entry has not converged after max_iter iterations.
+    """
+    B = h.shape[0]
+    load_ctrl = load is not None
+    allowed = np.broadcast_to(allowed, h.shape)
+    n_allowed = _bsum(allowed.astype(float))
+    hmin = np.where(allowed, h, np.inf).min(axis=_AX, keepdims=True)
+    hmax = np.where(allowed, h, -np.inf).max(axis=_AX, keepdims=True)
+    hrange = np.where(np.isfinite(hmax - hmin), hmax - hmin, 0.0)
+    H = np.full((B, 1, 1), np.inf) if hardness is None else np.asarray(hardness, float).reshape(B, 1, 1)
+    if load_ctrl:
+        W = np.asarray(load, float).reshape(B, 1, 1)
+        trivial = (W <= 0).reshape(B)
+        if p0 is None:
+            p = np.where(allowed, W / (cell_area * np.maximum(n_allowed, 1)), 0.0)
+        else:
+            p = np.where(allowed, np.maximum(p0, 0.0), 0.0)
+            s = _bsum(p) * cell_area
+            p = np.where(s > 0, p * W / np.where(s > 0, s, 1.0),
+                         np.where(allowed, W / (cell_area * np.maximum(n_allowed, 1)), 0.0))
+        p = np.minimum(p, H)
+        delta = np.zeros((B, 1, 1))
+    else:
+        delta = np.asarray(approach, float).reshape(B, 1, 1)
+        W = None
+        pen = np.where(allowed, np.maximum(delta - h, 0.0), 0.0)
+        trivial = (~np.any(pen > 0, axis=_AX)).reshape(B)
+        if p0 is None:
+            # self-compliance of one cell gives the pressure scale; CG corrects the rest
+            k00 = apply_k(np.pad(np.ones((1, 1, 1)), ((0, 0), (0, h.shape[1] - 1), (0, h.shape[2] - 1))))[0, 0, 0]
+            p = np.minimum(0.1 * pen / k00, H)
+        else:
+            p = np.where(allowed, np.clip(p0, 0.0, H), 0.0)
+    active = ~trivial
+    iters = np.zeros(B, dtype=int)
+    err = np.where(trivial, 0.0, np.inf)
+    t = np.zeros_like(h)
+    G_old = np.ones((B, 1, 1))
+    use_beta = np.zeros((B, 1, 1), dtype=bool)
+    u = apply_k(p)
+    for it in range(max_iter + 1):
+        g = h + u
+        Ic = (p > 0) & (p < H) & allowed
+        nIc = _bsum(Ic.astype(float))
+        if load_ctrl:
+            gbar = np.where(nIc > 0, _bsum(np.where(Ic, g, 0.0)) / np.maximum(nIc, 1), hmin)
+            delta = np.where(active.reshape(B, 1, 1), gbar, delta)
+        g = g - delta
+        # --- error of the current iterate (p, g consistent) ---
+        scale = np.maximum(np.maximum(hrange, np.abs(u).max(axis=_AX, keepdims=True)), 1e-300)
+        psum = _bsum(p)
+        e1 = _bsum(np.where(Ic, p * np.abs(g), 0.0)) / (np.where(psum > 0, psum, 1.0) * scale)
+        e2 = np.where(allowed & (p <= 0), np.maximum(-g, 0.0), 0.0).max(axis=_AX, keepdims=True) / scale
+        e = np.maximum(e1, e2)
+        if load_ctrl:
+            e = np.maximum(e, np.abs(psum * cell_area - W) / np.where(W > 0, W, 1.0))
+        e = e.reshape(B)
+        err = np.where(active, e, err)
+        active &= ~(err < tol)
+        if not active.any() or it == max_iter:
+            break
+        iters += active
+        act = active.reshape(B, 1, 1)
+        # --- conjugate direction on the contact set ---
+        G = _bsum(np.where(Ic, g * g, 0.0))
+        beta = np.where(use_beta, G / np.where(G_old > 0, G_old, 1.0), 0.0)
+        t = np.where(Ic, g + beta * t, 0.0)
+        G_old = np.where(act, G, G_old)
+        r = apply_k(t)
+        if load_ctrl:
+            r = r - _bsum(np.where(Ic, r, 0.0)) / np.maximum(nIc, 1)
+        num = _bsum(np.where(Ic, g * t, 0.0))
+        den = _bsum(np.where(Ic, r * t, 0.0))
+        tau = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+        p_new = p - tau * t
+        p_new = np.clip(p_new, 0.0, H)
+        Iol = (p_new <= 0) & (g < 0) & allowed
+        has_ol = np.any(Iol, axis=_AX, keepdims=True)
+        p_new = np.where(Iol, np.minimum(p_new - tau * g, H), p_new)
+        p_new = np.where(allowed, p_new, 0.0)
+        if load_ctrl:
+            s = _bsum(p_new) * cell_area
+            p_new = np.where(s > 0, p_new * (W / np.where(s > 0, s, 1.0)), p_new)
+            p_new = np.minimum(p_new, H)
+        use_beta = np.where(act, ~has_ol, use_beta)
+        p = np.where(act, p_new, p)
+        u = apply_k(p)
+    if active.any():
+        worst = float(np.max(err[active]))
+        raise ConvergenceError(
+            f"solve_normal: {int(active.sum())} of {B} problems not converged to tol={tol:g}",
+            worst, int(iters.max()))
+    if load_ctrl:
+        p = np.where(trivial.reshape(B, 1, 1), 0.0, p)
+        u = apply_k(p) if trivial.any() else u
+    g = h + u - delta
+    return {"pressure": p, "displacement": u, "gap": g, "approach": delta.reshape(B),
+            "iterations": iters, "residual": err}
+
+
+def solve_normal(hs: ElasticHalfSpace, gap, load: float | None = None, approach: float | None = None,
+                 *, mask=None, tol: float = 1e-8, max_iter: int = 2000, hardness: float | None = None,
+                 initial_pressure=None) -> NormalSolution:
+    """Frictionless normal contact of two elastic bodies separated by ``gap``.
+
+    Args:
+        hs: half-space operator (defines grid, moduli, periodicity).
+        gap: (nx, ny) initial separation h in mm (e.g. ``z.max() - z`` for a rough surface against
+            a flat, or the equivalent macro gap of ``coupling.macro_gap``); only differences matter
+            in load control.
+        load: total normal force W in N (load control, ≥ 0), or
+        approach: rigid approach δ in mm (approach control): deformed gap = h + K*p − δ.
+        mask: (nx, ny) bool, True where contact is allowed (False e.g. in the bolt hole).
+        tol: tolerance of the complementarity/gap error (see module docstring), in (0, 1).
+        max_iter: iteration cap; exceeding it raises ConvergenceError with the residual.
+        hardness: optional pressure cap H in MPa (perfectly plastic asperities).
+        initial_pressure: optional (nx, ny) warm start in MPa.
+
+    Returns:
+        NormalSolution.
+
+    Raises:
+        ValueError: bad input (names the argument). ConvergenceError: not converged.
+    """
+    if not isinstance(hs, ElasticHalfSpace):
+        raise ValueError(f"hs: expected an ElasticHalfSpace, got {type(hs).__name__}")
+    grid = hs.grid
+    h = grid.check_field("gap", gap)
+    if (load is None) == (approach is None):
+        raise ValueError("load/approach: give exactly one of load (N) or approach (mm)")
+    if mask is None:
+        allowed = np.ones(grid.shape, dtype=bool)
+    else:
+        allowed = np.asarray(mask)
+        if allowed.shape != grid.shape:
+            raise ValueError(f"mask: expected shape {grid.shape}, got {allowed.shape}")
+        allowed = allowed.astype(bool)
+        if not allowed.any():
+            raise ValueError("mask: must allow contact on at least one cell")
+    tol = positive_scalar("tol", tol, upper=1.0, upper_open=True)
+    if int(max_iter) < 1:
+        raise ValueError(f"max_iter: must be >= 1, got {max_iter!r}")
+    H = None
+    if hardness is not None:
+        H = positive_scalar("hardness", hardness)
+    kw = {}
+    if load is not None:
+        W = positive_scalar("load", load, allow_zero=True)
+        if H is not None and W > H * grid.cell_area * allowed.sum() * (1 - 1e-12):
+            raise ValueError(f"load: must be below hardness × allowed area = "
+                             f"{H * grid.cell_area * allowed.sum():.6g} N, got {W!r}")
+        kw["load"] = np.array([W])
+    else:
+        d = float(approach)
+        if not np.isfinite(d):
+            raise ValueError(f"approach: must be finite, got {approach!r}")
+        kw["approach"] = np.array([d])
+    p0 = None if initial_pressure is None else grid.check_field("initial_pressure", initial_pressure)[None]
+    res = pk_normal_batch(hs._apply_normal, h[None], allowed[None], grid.cell_area, tol=tol,
+                          max_iter=int(max_iter), hardness=None if H is None else np.array([H]),
+                          p0=p0, **kw)
+    p = res["pressure"][0]
+    contact = p > 0
+    return NormalSolution(
+        pressure=p, gap=res["gap"][0], displacement=res["displacement"][0],
+        approach=float(res["approach"][0]), load=float(p.sum() * grid.cell_area), contact=contact,
+        contact_fraction=float(contact.sum() / allowed.sum()), iterations=int(res["iterations"][0]),
+        residual=float(res["residual"][0]), mask=allowed, initial_gap=h,
+        hardness=float("inf") if H is None else H)
