@@ -22,9 +22,13 @@ Meshing strategy (the gmsh 4.8 traps listed in DESIGN §4.1):
   snapped to A's so that pairs coincide exactly;
 * the nut (group B) is tied to plate A (group A) through identically meshed annuli whose node pairs
   are merged here, so the returned mesh is one body through the bolt, cut only at the lap interface;
-* sizes: ``lap_mesh_size`` on the lap faces growing to ``body_mesh_size`` away from them, and
-  ``hole_mesh_size`` on the hole, shank and washer edges (the 0.25 mm clearance between shank and
-  hole would otherwise give intersecting facets of the two independently meshed groups).
+* sizes: ``lap_mesh_size`` on the lap faces growing to ``body_mesh_size`` away from them,
+  ``hole_mesh_size`` on the hole and shank surfaces (with the 0.25 mm shank/hole clearance, coarser
+  facets of the shank and of plate B's hole intersect and gmsh's boundary recovery fails), and
+  ``leaf_mesh_size`` in the leaf spring (its bending is the first mode);
+* P2: mid-edge nodes on the geometry, then gmsh's elastic high-order optimisation: the thin
+  (0.25 mm) annuli under the head and on the nut otherwise give curved cells with negative
+  Jacobians. The build fails with :class:`GeometryError` if any cell stays inverted.
 """
 from __future__ import annotations
 
@@ -282,6 +286,22 @@ def _surface_key(gmsh, s: int) -> tuple:
     return tuple(np.round(bb, 6))
 
 
+def _threshold(fld, faces: list[int], size_min: float, size_max: float, dist_max: float,
+               stop_at_dist_max: bool = False) -> int:
+    """Distance-to-``faces`` threshold field: size_min on the faces growing linearly to size_max
+    at dist_max (mm); with ``stop_at_dist_max`` it does not constrain beyond dist_max."""
+    dist = fld.add("Distance")
+    fld.setNumbers(dist, "FacesList", faces)
+    thr = fld.add("Threshold")
+    fld.setNumber(thr, "InField", dist)
+    fld.setNumber(thr, "SizeMin", size_min)
+    fld.setNumber(thr, "SizeMax", size_max)
+    fld.setNumber(thr, "DistMin", 0.0)
+    fld.setNumber(thr, "DistMax", dist_max)
+    fld.setNumber(thr, "StopAtDistMax", int(stop_at_dist_max))
+    return thr
+
+
 def _build_gmsh_model(gmsh, p: ResonatorParams) -> dict:
     """Create the OCC model, physical groups, periodic constraints and size fields."""
     g = _Layout(p)
@@ -368,34 +388,20 @@ def _build_gmsh_model(gmsh, p: ResonatorParams) -> dict:
     gmsh.model.mesh.setPeriodic(2, lap_b_s, lap_master, ident)
     gmsh.model.mesh.setPeriodic(2, nut_top, nut_master, ident)
 
-    # --- sizes: lap faces -> lap size, hole/washer/shank edges -> hole size, grow to body size
+    # --- sizes: lap faces -> lap size growing to body size over refine_distance
     fld = gmsh.model.mesh.field
-    d_lap = fld.add("Distance")
-    fld.setNumbers(d_lap, "FacesList", lap_a_s + lap_b_s)
-    t_lap = fld.add("Threshold")
-    fld.setNumber(t_lap, "InField", d_lap)
-    fld.setNumber(t_lap, "SizeMin", p.lap_mesh_size)
-    fld.setNumber(t_lap, "SizeMax", p.body_mesh_size)
-    fld.setNumber(t_lap, "DistMin", 0.0)
-    fld.setNumber(t_lap, "DistMax", p.refine_distance)
+    t_lap = _threshold(fld, lap_a_s + lap_b_s, p.lap_mesh_size, p.body_mesh_size,
+                       p.refine_distance)
     # the clearance: every surface within the hole radius (hole and shank cylinders, inner nut ring),
     # so that the shank and hole surfaces, meshed in one connected component of group B, do not
-    # intersect (gmsh then fails in boundary recovery with "A segment and a facet intersect")
+    # intersect (gmsh then fails in boundary recovery with "A segment and a facet intersect").
+    # Beyond hole_grading_distance this field stops constraining, so the pair count depends on the
+    # lap and hole sizes only, not on body_mesh_size.
     r_in = g.r_hole + 1e-6
     bolt_box = (-r_in, -r_in, z_nut - 1e-3, r_in, r_in, g.t + p.head_height + 1e-3)
     faces = [c for _, c in gmsh.model.getEntitiesInBoundingBox(*bolt_box, dim=2)]
-    d_hole = fld.add("Distance")
-    fld.setNumbers(d_hole, "FacesList", faces)
-    fld.setNumber(d_hole, "NumPointsPerCurve", 60)
-    t_hole = fld.add("Threshold")
-    fld.setNumber(t_hole, "InField", d_hole)
-    fld.setNumber(t_hole, "SizeMin", p.hole_mesh_size)
-    fld.setNumber(t_hole, "SizeMax", p.lap_mesh_size)
-    fld.setNumber(t_hole, "DistMin", 0.0)
-    fld.setNumber(t_hole, "DistMax", p.hole_grading_distance)
-    # beyond DistMax this field stops constraining: the pair count then depends on the lap and
-    # hole sizes only, not on body_mesh_size
-    fld.setNumber(t_hole, "StopAtDistMax", 1)
+    t_hole = _threshold(fld, faces, p.hole_mesh_size, p.lap_mesh_size, p.hole_grading_distance,
+                        stop_at_dist_max=True)
     # the leaf carries the first (bending) mode: keep a few P2 elements through its thickness
     b_leaf = fld.add("Box")
     fld.setNumber(b_leaf, "VIn", p.leaf_mesh_size)
