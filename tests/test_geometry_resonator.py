@@ -213,3 +213,22 @@ def test_scaled_jacobian_detects_inverted_cell_and_mesh_is_valid(default_mesh, c
     assert scaled_jacobian(x, cell)[0] == pytest.approx(-0.2, abs=1e-12)
     for m in (default_mesh, coarse_mesh):
         assert scaled_jacobian(m.points, m.cells).min() > 0.05
+
+
+@pytest.mark.parametrize("kw", [dict(head_diameter=14.0, nut_diameter=12.0),
+                                dict(head_diameter=12.0, nut_diameter=14.0, overlap=24.0,
+                                     plate_width=22.0, hole_diameter=9.0)])
+def test_variant_geometries(kw):
+    # head and nut of different sizes split the lap faces at three radii: still matched pairs
+    p = dataclasses.replace(COARSE, **kw)
+    m = build_resonator(p)
+    vol = cell_volumes(m.points, m.cells)
+    nominal = nominal_volumes(p)
+    for marker, name in MARKER_NAMES.items():
+        assert vol[m.cell_markers == marker].sum() == pytest.approx(nominal[name], rel=1e-2), name
+    assert np.max(np.abs(m.points[m.pair_nodes[:, 0]] - m.points[m.pair_nodes[:, 1]])) <= 1e-12
+    area = p.overlap * p.plate_width - math.pi * (p.hole_diameter / 2) ** 2
+    assert m.pair_area.sum() == pytest.approx(area, rel=1e-2)
+    washer = math.pi * ((p.nut_diameter / 2) ** 2 - (p.hole_diameter / 2) ** 2)
+    assert _tri_area(m.points, m.facets[m.facet_markers == WASHER_NUT]).sum() == pytest.approx(
+        washer, rel=1e-2)
