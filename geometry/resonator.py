@@ -80,7 +80,7 @@ class ResonatorParams:
     hole_mesh_size: float = 1.8  # element size on the hole / shank surfaces (0.25 mm clearance)
     refine_distance: float = 20.0  # distance from the lap faces over which sizes grow to body size
     hole_grading_distance: float = 3.0  # distance from the hole over which sizes grow to lap size
-    leaf_mesh_size: float = 4.0  # element size in the leaf spring (first mode = leaf bending)
+    leaf_mesh_size: float = 3.0  # element size in the leaf spring (first mode = leaf bending)
     order: int = 2  # P2 tetrahedra (order 1 allowed for tests)
     seed: int = 1  # gmsh Mesh.RandomSeed: same seed, same mesh
 
