@@ -17,9 +17,32 @@ import dolfinx
 
 from fe_joint.elasticity import (Material, assemble_eigenstrain_load, assemble_mass, assemble_stiffness,
                                  vector_space)
-from fe_joint.node_map import global_node_dofs
+from fe_joint.mesh import original_node_dofs
 
 SHANK_MARKER = 3
+
+
+def global_node_dofs(V, nodes: np.ndarray) -> np.ndarray:
+    """Global PETSc DOF numbers (x, y, z) of ORIGINAL nodes, identical on every rank (collective).
+
+    Args:
+        V: vector P2 space on the tet10 mesh.
+        nodes: (n,) original node numbers.
+
+    Returns:
+        (n, 3) int64 global DOF indices.
+    """
+    nodes = np.asarray(nodes, dtype=np.int64)
+    blk, owned = original_node_dofs(V, nodes, return_owned=True)
+    imap = V.dofmap.index_map
+    gblk = np.where(owned, blk + imap.local_range[0], -1).astype(np.int64)
+    out = np.empty_like(gblk)
+    V.mesh.comm.Allreduce(gblk, out, op=MPI.MAX)
+    if np.any(out < 0):
+        raise ValueError(f"nodes {nodes[out < 0][:5].tolist()} are not nodes of the mesh "
+                         "(check pair_nodes / excitation_node)")
+    bs = V.dofmap.index_map_bs
+    return out[:, None] * bs + np.arange(bs)[None, :]
 
 
 @dataclass
@@ -142,13 +165,33 @@ def assemble_joint(fe, material: Material, degree: int = 2, with_mass: bool = Tr
 
 
 def shank_axial_force(problem: JointProblem, u, eigenstrain: float) -> float:
-    """Mean axial force of the shank, (1/L) ∫_shank sigma_zz dV, N.
+    """Axial force in the free span of the shank, N: A_shank * mean(sigma_zz) over the shank cells
+    whose centroid lies within L/4 of the interface plane z = 0.
 
-    For a shank with traction-free sides the section force is the same on every cross-section, so
-    this volume mean is an independent (discretization-level) measure of the bolt force.
+    The shank sides are traction-free between head and nut, so the section force is the same on
+    every cross-section there; the volume mean of sigma_zz over a slice times the section area
+    (shank volume / length) measures it independently of the contact forces. The parts of the
+    shank inside the nut/head are excluded (the force is handed over there).
     """
-    from fe_joint.elasticity import axial_eigenstrain, stress, strain
+    from fe_joint.elasticity import axial_eigenstrain, strain, stress
+    import dolfinx.fem as fem
+
+    mesh = problem.V.mesh
+    comm = mesh.comm
+    tags = problem.fe.cell_tags
+    cells = tags.indices[tags.values == SHANK_MARKER]
+    W = fem.FunctionSpace(mesh, ("DG", 0))
+    zc = fem.Function(W)
+    zc.interpolate(lambda x: x[2])
+    slab = cells[np.abs(zc.x.array[cells]) < problem.shank_length / 4]
+    ind = fem.Function(W)
+    ind.x.array[:] = 0.0
+    ind.x.array[slab] = 1.0
     sig = stress(strain(u) - eigenstrain * axial_eigenstrain(), problem.material)
-    comm = problem.V.mesh.comm
-    val = dolfinx.fem.assemble_scalar(dolfinx.fem.form(sig[2, 2] * problem.dx_shank))
-    return comm.allreduce(val, op=MPI.SUM) / problem.shank_length
+    dx = problem.dx_shank
+
+    def total(expr):
+        return comm.allreduce(fem.assemble_scalar(fem.form(expr)), op=MPI.SUM)
+
+    vol_shank = total(fem.Constant(mesh, 1.0) * dx)
+    return total(ind * sig[2, 2] * dx) / total(ind * dx) * vol_shank / problem.shank_length

@@ -20,9 +20,10 @@ Method (DESIGN §4.2):
    *closed but untied*: the normal constraint d_z = 0 is kept, the tangential tie removed, and they
    are never reopened. The set can then only shrink finitely often, so the iteration terminates.
 6. Pair normal loads: the raw nodal forces are turned into a pressure by the consistent P2 L2
-   recovery on the lap triangles (M_s p = N_raw, which is exact for any quadratic pressure), clipped
-   to p >= 0 on closed pairs and 0 on open ones, times the tributary area, and rescaled so their sum
-   is exactly the clamping force (the recovery conserves force only up to O(h²)).
+   recovery of :func:`recover_pressure` (vertex forces handed to the adjacent mid-edge nodes,
+   vertex pressure averaged from them), clipped to p >= 0 on closed pairs and 0 on open ones, times
+   the tributary area, and rescaled so their sum is exactly the clamping force (the vertex/mid-edge
+   split of the tributary area differs from the consistent P2 weights, O(h²)).
 """
 from __future__ import annotations
 
@@ -192,27 +193,39 @@ def lap_triangles(data, marker: int = 11) -> np.ndarray:
 
 
 def recover_pressure(tri6: np.ndarray, xyz: np.ndarray, nodal_force: np.ndarray) -> np.ndarray:
-    """Consistent P2 L2 recovery of a pressure from nodal normal forces: solve M_s p = F.
+    """Pressure from raw P2 nodal normal forces, conservative and non-negative for F >= 0.
+
+    The consistent P2 load of a smooth pressure puts ~nothing on vertex nodes (weight 0) and A/3
+    on each mid-edge node, so F / (tributary area) is useless at vertices. Here each vertex force
+    is handed to its adjacent mid-edge nodes (in proportion to their consistent weight), the
+    mid-edge pressure is force / consistent weight (sum of A/3 over adjacent triangles), and a
+    vertex takes the weight-averaged pressure of its adjacent mid-edge nodes.
 
     Args:
-        tri6: (n_tri, 6) pair-index triangles (gmsh order).
+        tri6: (n_tri, 6) pair-index triangles (gmsh order v0, v1, v2, m01, m12, m20).
         xyz: (n_pairs, 3) coordinates, mm.
         nodal_force: (n_pairs,) raw nodal normal forces, N.
 
     Returns:
         (n_pairs,) pressure, MPa (nodes outside every triangle get 0).
     """
-    p = xyz[tri6[:, :3]]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    rows = np.repeat(tri6, 6, axis=1).ravel()
-    cols = np.tile(tri6, (1, 6)).ravel()
-    vals = (area[:, None, None] * _TRI6_MASS[None]).ravel()
     n = len(xyz)
-    Ms = sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).tocsc()
-    used = np.unique(tri6)
-    out = np.zeros(n)
-    out[used] = spla.spsolve(Ms[used][:, used], nodal_force[used])
-    return out
+    p3 = xyz[tri6[:, :3]]
+    area = 0.5 * np.linalg.norm(np.cross(p3[:, 1] - p3[:, 0], p3[:, 2] - p3[:, 0]), axis=1)
+    # vertex -> mid-edge adjacency (each vertex touches two mid-edge nodes per triangle)
+    adj_v = tri6[:, [0, 0, 1, 1, 2, 2]].ravel()
+    adj_m = tri6[:, [3, 5, 3, 4, 4, 5]].ravel()
+    w_adj = np.repeat(area / 3, 6)
+    A = sp.coo_matrix((w_adj, (adj_v, adj_m)), shape=(n, n)).tocsr()
+    A.sum_duplicates()
+    wv = np.asarray(A.sum(axis=1)).ravel()
+    is_vertex = wv > 0
+    share = sp.diags(np.where(is_vertex, 1.0 / np.where(is_vertex, wv, 1.0), 0.0)) @ A  # rows sum to 1
+    weight_m = np.zeros(n)
+    np.add.at(weight_m, tri6[:, 3:].ravel(), np.repeat(area / 3, 3))
+    force_m = np.where(weight_m > 0, nodal_force, 0.0) + share.T @ np.where(is_vertex, nodal_force, 0.0)
+    p = np.where(weight_m > 0, force_m / np.where(weight_m > 0, weight_m, 1.0), 0.0)
+    return np.where(is_vertex, share @ p, p)
 
 
 @dataclass
@@ -223,7 +236,7 @@ class PreloadResult:
         bolt_force: target clamping force = sum of pair normal forces, N.
         eigenstrain: axial shortening eigenstrain applied in the shank (dimensionless).
         shank_force: mean axial force in the shank (1/L)∫sigma_zz dV, N (independent check).
-        pair_normal_force: (n_pairs,) N, pressure x tributary area.
+        pair_normal_force: (n_pairs,) N, pressure x tributary area (sum = bolt_force).
         pair_pressure: (n_pairs,) MPa (0 on open pairs).
         pair_gap: (n_pairs,) normal gap, mm (0 on closed pairs, >= 0 on open ones).
         pair_raw_force: (n_pairs, 3) raw nodal pair forces (x, y, z), N.
@@ -343,7 +356,7 @@ def write_preload_fields(problem, res: PreloadResult, out_dir: str) -> None:
 
     from fe_joint.elasticity import von_mises_dg0
     from fe_joint.joint_setup import SHANK_MARKER
-    from fe_joint.node_map import global_node_dofs
+    from fe_joint.joint_setup import global_node_dofs
 
     comm = problem.V.mesh.comm
     if comm.rank == 0:

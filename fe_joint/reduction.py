@@ -1,0 +1,228 @@
+"""Craig–Bampton reduction of the joint and the whole FE chain (mesh -> preload -> ReducedModel).
+
+Boundary DOFs: all nodes of both lap faces (the matched pairs) plus the excitation/response node;
+fixed-interface modes of (K_II, M_II) up to a cut-off frequency. The constraint-mode blocks come
+from :class:`fe_joint.condensation.BoundaryCondensation` chunk by chunk (bounded memory) and
+K_r,BB = K_BB + K_BI Psi (no dense Psiᵀ K Psi). The same condensed stiffness serves the preload
+contact problem, so the preload costs almost nothing on top of the reduction.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import resource
+import time
+
+import numpy as np
+import scipy.linalg as sla
+
+from fe_joint.condensation import BoundaryCondensation
+from fe_joint.modal import free_modes, solve_eigenproblem, to_hz
+from fe_joint.reduced_model import ReducedModel, check_damping_ratio, modal_damping_matrix
+
+
+def _peak_mb() -> float:
+    """Peak resident memory of this process, MB."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def fixed_interface_modes(cond: BoundaryCondensation, cutoff_hz: float, nev0: int = 20,
+                          max_modes: int = 2000) -> tuple[np.ndarray, list]:
+    """Fixed-interface modes of (K_II, M_II) with frequency <= cutoff_hz.
+
+    Requests ``nev0`` pairs and doubles until the highest converged one passes the cut-off.
+
+    Returns:
+        (frequencies Hz ascending, list of M_II-normalized interior Vecs).
+    """
+    if not (np.isfinite(cutoff_hz) and cutoff_hz > 0):
+        raise ValueError(f"cutoff_hz must be a finite frequency > 0 Hz, got {cutoff_hz}")
+    KII, MII = cond.interior_pair()
+    n_int = KII.getSize()[0]
+    nev = min(nev0, n_int)
+    while True:
+        vals, vecs = solve_eigenproblem(KII, MII, nev, sigma=0.0)
+        f = to_hz(vals)
+        if f[-1] > cutoff_hz or nev >= min(max_modes, n_int):
+            keep = f <= cutoff_hz
+            return f[keep], [v for v, k in zip(vecs, keep) if k]
+        nev = min(2 * nev, max_modes, n_int)
+
+
+def dof_labels(layout, n_modes: int) -> list[str]:
+    """Labels of the reduced DOFs (boundary in canonical order, then modes)."""
+    npair = len(layout.pair_a)
+    lab = np.empty(layout.size, dtype=object)
+    for side, idx in (("A", layout.pair_a), ("B", layout.pair_b)):
+        for c, ax in enumerate("xyz"):
+            lab[idx[:, c]] = [f"pair{p}.{side}.{ax}" for p in range(npair)]
+    for name, idx in layout.extra.items():
+        for c, ax in enumerate("xyz"):
+            lab[idx[c]] = f"{name}.{ax}"
+    names = list(lab)
+    # a node that is both excitation and response keeps the excitation label
+    return names + [f"mode{k}" for k in range(n_modes)]
+
+
+def craig_bampton(problem, cutoff_hz: float, damping_ratio: float = 1e-3, preload=None,
+                  condensation: BoundaryCondensation | None = None, chunk: int = 256,
+                  full_modes=None, timings: dict | None = None, interface_modes=None) -> ReducedModel:
+    """Craig–Bampton reduced model of an assembled joint.
+
+    Args:
+        problem: JointProblem (K, M, layout) from ``joint_setup.assemble_joint``.
+        cutoff_hz: fixed-interface modes up to this frequency are kept, Hz.
+        damping_ratio: modal damping ratio of the reduced model, in [0, 1).
+        preload: PreloadResult (fills the pair preload fields) or None (zeros, all closed).
+        condensation: a BoundaryCondensation with mass on ``problem.layout.dofs`` (else built).
+        chunk: constraint modes per block.
+        full_modes: ModalResult of the full model (stored frequencies) or None.
+        timings: dict receiving stage timings (s) and peak memory (MB).
+        interface_modes: (frequencies, Vecs) already computed with ``condensation.condense`` (reused).
+
+    Returns:
+        ReducedModel (identical on every rank).
+    """
+    zeta = check_damping_ratio(damping_ratio)
+    timings = {} if timings is None else timings
+    layout = problem.layout
+    if condensation is None:
+        condensation = BoundaryCondensation(problem.K, problem.M, layout.dofs)
+    if interface_modes is None:
+        t = time.perf_counter()
+        fm, modes = fixed_interface_modes(condensation, cutoff_hz)
+        timings["fixed_interface_modes_s"] = time.perf_counter() - t
+    else:
+        fm, modes = interface_modes
+    blocks = getattr(condensation, "condensed", {})
+    if "M_PB" not in blocks or blocks["M_PB"].shape[0] != len(modes):
+        t = time.perf_counter()
+        blocks = condensation.condense(modes, chunk)
+        timings["constraint_modes_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    nb, nm = layout.size, len(modes)
+    K = np.zeros((nb + nm, nb + nm))
+    M = np.zeros_like(K)
+    K[:nb, :nb] = blocks["K_BB"]
+    K[nb:, nb:] = np.diag((2 * np.pi * fm) ** 2)
+    M[:nb, :nb] = blocks["M_BB"]
+    M[nb:, :nb] = blocks["M_PB"]
+    M[:nb, nb:] = blocks["M_PB"].T
+    M[nb:, nb:] = np.eye(nm)
+    C, fr = modal_damping_matrix(K, M, zeta)
+    timings["projection_s"] = time.perf_counter() - t
+    npair = len(layout.pair_a)
+    data = problem.fe.data
+    frame = np.broadcast_to(np.eye(3), (npair, 3, 3)).copy()
+    if preload is not None:
+        pn, pp, pg, ps = (preload.pair_normal_force, preload.pair_pressure, preload.pair_gap,
+                          preload.pair_status)
+        meta_pre = dict(bolt_force=preload.bolt_force, shank_force=preload.shank_force,
+                        eigenstrain=preload.eigenstrain, n_closed=int(np.sum(preload.closed)),
+                        n_toggled=preload.n_toggled, active_set_iterations=preload.iterations,
+                        max_support_reaction=float(np.abs(preload.support_reactions).max()))
+    else:
+        pn, pp, pg, ps = np.zeros(npair), np.zeros(npair), np.zeros(npair), np.ones(npair, dtype=int)
+        meta_pre = {}
+    h = hashlib.sha256()
+    for arr in (data.points, data.cells, data.pair_nodes):
+        h.update(np.ascontiguousarray(arr).tobytes())
+    meta = dict(n_dofs_full=problem.n_dofs, n_pairs=npair, n_boundary=nb, n_modes=nm, cutoff_hz=cutoff_hz,
+                fixed_interface_frequencies=fm, mesh_sha256=h.hexdigest(), material=vars(problem.material)
+                if hasattr(problem.material, "__dict__") else str(problem.material),
+                n_ranks=problem.K.getComm().getSize(), **meta_pre)
+    if full_modes is not None:
+        meta["breathing_index"] = full_modes.breathing_index
+        meta["breathing_frequency_hz"] = (float(full_modes.frequencies[full_modes.breathing_index])
+                                          if full_modes.breathing_index >= 0 else None)
+        meta["n_rigid_full"] = full_modes.n_rigid
+    meta["timings"] = timings
+    return ReducedModel(K=K, M=M, C=C, damping_ratio=zeta, dof_labels=dof_labels(layout, nm),
+                        pair_xyz=np.asarray(data.pair_xyz, float), pair_area=np.asarray(data.pair_area, float),
+                        pair_frame=frame, pair_dofs=np.stack([layout.pair_a, layout.pair_b], axis=1),
+                        preload_normal_force=pn, preload_pressure=pp, preload_gap=pg, preload_status=ps,
+                        excitation_dof=int(layout.extra["excitation"][0]),
+                        response_dof=int(layout.extra["response"][0]),
+                        full_frequencies=(full_modes.frequencies if full_modes is not None else np.zeros(0)),
+                        reduced_frequencies=fr, n_boundary=nb, metadata=meta)
+
+
+def build_reduced_model_from_fe(fe, material, preload_force: float, damping_ratio: float = 1e-3,
+                                cutoff_hz: float = 10000.0, out_dir: str | None = None, chunk: int = 256,
+                                n_full_elastic: int = 12) -> ReducedModel:
+    """The whole FE chain on a distributed joint mesh: assemble, preload, modes, Craig–Bampton.
+
+    Collective. Writes ``reduced_model.h5``, ``preload.xdmf`` and ``preload_pressure.png`` into
+    ``out_dir`` if given (rank 0 writes the HDF5/PNG).
+
+    Args:
+        fe: ResonatorFE / JointFE.
+        material: elasticity.Material.
+        preload_force: bolt force, N (> 0).
+        damping_ratio: modal damping ratio, [0, 1).
+        cutoff_hz: fixed-interface mode cut-off, Hz (> 0).
+        out_dir: output folder or None.
+        chunk: constraint modes per block (memory ~ 5 n_I chunk 8 bytes).
+        n_full_elastic: elastic modes of the full model computed for checking (0 to skip).
+
+    Returns:
+        ReducedModel (identical on every rank).
+    """
+    from fe_joint.joint_setup import assemble_joint
+    from fe_joint.preload import solve_preload
+
+    if not (np.isfinite(preload_force) and preload_force > 0):
+        raise ValueError(f"preload_force must be a finite bolt force > 0 N, got {preload_force}")
+    check_damping_ratio(damping_ratio)
+    if not (np.isfinite(cutoff_hz) and cutoff_hz > 0):
+        raise ValueError(f"cutoff_hz must be a finite frequency > 0 Hz, got {cutoff_hz}")
+    timings: dict = {}
+    t0 = t = time.perf_counter()
+    problem = assemble_joint(fe, material)
+    timings["assembly_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    cond = BoundaryCondensation(problem.K, problem.M, problem.layout.dofs)
+    timings["factorization_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    fm, modes = fixed_interface_modes(cond, cutoff_hz)
+    timings["fixed_interface_modes_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    cond.condense(modes, chunk)
+    timings["constraint_modes_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    pre = solve_preload(fe, material, preload_force, out_dir=out_dir, problem=problem, condensation=cond)
+    timings["preload_s"] = time.perf_counter() - t
+    full = None
+    if n_full_elastic > 0:
+        t = time.perf_counter()
+        ex = problem.layout.dofs[problem.layout.extra["excitation"]]
+        full = free_modes(problem.K, problem.M, n_full_elastic, probe_dofs=ex)
+        timings["full_modes_s"] = time.perf_counter() - t
+    rm = craig_bampton(problem, cutoff_hz, damping_ratio, pre, cond, chunk, full, timings,
+                       interface_modes=(fm, modes))
+    timings["total_s"] = time.perf_counter() - t0
+    timings["peak_memory_mb_rank0"] = _peak_mb()
+    cond.destroy()
+    if out_dir is not None and fe.mesh.comm.rank == 0:
+        os.makedirs(out_dir, exist_ok=True)
+        rm.save(os.path.join(out_dir, "reduced_model.h5"))
+    fe.mesh.comm.barrier()
+    return rm
+
+
+def build_reduced_model(params, material, preload_force: float, damping_ratio: float = 1e-3,
+                        cutoff_hz: float = 10000.0, comm=None, out_dir: str | None = None,
+                        **kw) -> ReducedModel:
+    """Mesh the resonator (gmsh, rank 0) and run :func:`build_reduced_model_from_fe`. Collective.
+
+    Args:
+        params: geometry.resonator.ResonatorParams.
+        material, preload_force, damping_ratio, cutoff_hz, out_dir, kw: see
+            :func:`build_reduced_model_from_fe`.
+        comm: MPI communicator (default COMM_WORLD).
+    """
+    from mpi4py import MPI
+
+    from fe_joint.mesh import load_resonator
+    fe = load_resonator(params, MPI.COMM_WORLD if comm is None else comm)
+    return build_reduced_model_from_fe(fe, material, preload_force, damping_ratio, cutoff_hz, out_dir, **kw)
