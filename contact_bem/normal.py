@@ -124,8 +124,9 @@ def pk_normal_batch(apply_k, h: np.ndarray, allowed: np.ndarray, cell_area: floa
         trivial = (~np.any(pen > 0, axis=_AX)).reshape(B)
         if p0 is None:
             # self-compliance of one cell gives the pressure scale; CG corrects the rest
-            k00 = apply_k(np.pad(np.ones((1, 1, 1)), ((0, 0), (0, h.shape[1] - 1), (0, h.shape[2] - 1))))[0, 0, 0]
-            p = np.minimum(0.1 * pen / k00, H)
+            unit = np.zeros((1,) + h.shape[1:])
+            unit[0, 0, 0] = 1.0
+            p = np.minimum(0.1 * pen / apply_k(unit)[0, 0, 0], H)
         else:
             p = np.where(allowed, np.clip(p0, 0.0, H), 0.0)
     active = ~trivial
@@ -134,6 +135,9 @@ def pk_normal_batch(apply_k, h: np.ndarray, allowed: np.ndarray, cell_area: floa
     t = np.zeros_like(h)
     G_old = np.ones((B, 1, 1))
     use_beta = np.zeros((B, 1, 1), dtype=bool)
+    unit = np.zeros((1,) + h.shape[1:])
+    unit[0, 0, 0] = 1.0
+    tau_self = 0.5 / apply_k(unit)[0, 0, 0]
     u = apply_k(p)
     for it in range(max_iter + 1):
         g = h + u
@@ -161,6 +165,7 @@ def pk_normal_batch(apply_k, h: np.ndarray, allowed: np.ndarray, cell_area: floa
         # --- conjugate direction on the contact set ---
         G = _bsum(np.where(Ic, g * g, 0.0))
         beta = np.where(use_beta, G / np.where(G_old > 0, G_old, 1.0), 0.0)
+        beta = np.where(beta < 1e4, beta, 0.0)  # a vanishing previous gradient: restart, don't blow up
         t = np.where(Ic, g + beta * t, 0.0)
         G_old = np.where(act, G, G_old)
         r = apply_k(t)
@@ -168,7 +173,9 @@ def pk_normal_batch(apply_k, h: np.ndarray, allowed: np.ndarray, cell_area: floa
             r = r - _bsum(np.where(Ic, r, 0.0)) / np.maximum(nIc, 1)
         num = _bsum(np.where(Ic, g * t, 0.0))
         den = _bsum(np.where(Ic, r * t, 0.0))
-        tau = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+        # a single contact cell has a zero-mean gradient (t = 0): step the overlap set with the
+        # self-compliance scale instead so that new cells can still enter the contact
+        tau = np.where((den > 0) & (num > 0), num / np.where(den > 0, den, 1.0), tau_self)
         p_new = p - tau * t
         p_new = np.clip(p_new, 0.0, H)
         Iol = (p_new <= 0) & (g < 0) & allowed
