@@ -17,7 +17,7 @@ Choices (DESIGN §4.4, §4.6; named here because the paper is silent on them):
   cell gets N0 = 0 and gap = the smallest BEM separation over its cell; loaded elements have gap 0.
 * **Patches** — every element gets a square patch of the *same* side s = √(interface area /
   n_pairs) centred on its node, cut out of the same surface realization (bilinear resampling to
-  ``patch × patch`` points). Contact stiffness per unit area is intensive, so one patch size for
+  ``patch × patch`` points, ``contact_bem.extract_patches``). Contact stiffness per unit area is intensive, so one patch size for
   all elements, loaded by the element's mean pressure × s², gives k_n [N/mm³]; the element's
   stiffness is k_n × its tributary area. One size means one batched half-space operator.
 """
@@ -27,7 +27,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
-from scipy.ndimage import map_coordinates
 from scipy.spatial import cKDTree
 
 from contact_bem import Grid
@@ -38,14 +37,12 @@ class InterfaceGrid:
     """Global BEM grid over the lap face and its partition into element cells.
 
     Attributes:
-        grid: the contact_bem grid (cell-centred, mm).
-        origin: (x0, y0) of the grid's lower-left corner in the joint frame, mm.
+        grid: the contact_bem grid (cell-centred, mm, origin at the overlap's corner).
         mask: (n, n) bool, True where contact is possible (outside the bolt hole).
         owner: (n, n) int, index of the pair whose cell this grid cell belongs to.
         xc, yc: (n, n) cell-centre coordinates, mm.
     """
     grid: Grid
-    origin: tuple[float, float]
     mask: np.ndarray
     owner: np.ndarray
     xc: np.ndarray
@@ -53,8 +50,7 @@ class InterfaceGrid:
 
     @property
     def cell_area(self) -> float:
-        dx, dy = self.grid.size[0] / self.grid.shape[0], self.grid.size[1] / self.grid.shape[1]
-        return dx * dy
+        return self.grid.cell_area
 
 
 def interface_grid(pair_xy: np.ndarray, overlap: float, width: float, hole_diameter: float,
@@ -75,14 +71,14 @@ def interface_grid(pair_xy: np.ndarray, overlap: float, width: float, hole_diame
         raise ValueError(f"pair_xy: expected shape (n_pairs, 2), got {pair_xy.shape}")
     if not (n >= 4):
         raise ValueError(f"n = {n}: must be ≥ 4")
-    grid = Grid(shape=(n, n), size=(overlap, width))
     x0, y0 = -overlap / 2, -width / 2
+    grid = Grid(shape=(n, n), size=(overlap, width), origin=(x0, y0))
     xs = x0 + (np.arange(n) + 0.5) * overlap / n
     ys = y0 + (np.arange(n) + 0.5) * width / n
     xc, yc = np.meshgrid(xs, ys, indexing="ij")
     mask = np.hypot(xc, yc) >= hole_diameter / 2
     _, owner = cKDTree(pair_xy).query(np.column_stack([xc.ravel(), yc.ravel()]))
-    return InterfaceGrid(grid=grid, origin=(x0, y0), mask=mask, owner=owner.reshape(n, n),
+    return InterfaceGrid(grid=grid, mask=mask, owner=owner.reshape(n, n),
                          xc=xc, yc=yc)
 
 
@@ -150,25 +146,3 @@ def element_loads(ig: InterfaceGrid, pressure: np.ndarray, gap: np.ndarray, area
 def patch_side(area: np.ndarray) -> float:
     """Side of the common element patch: √(interface area / number of elements), mm."""
     return float(np.sqrt(np.sum(area) / len(area)))
-
-
-def element_patches(ig: InterfaceGrid, z: np.ndarray, pair_xy: np.ndarray, side: float,
-                    n: int) -> np.ndarray:
-    """Cut an ``n × n`` patch of side ``side`` around every pair from the global surface.
-
-    Bilinear resampling of the same realization (outside the grid the edge value is held).
-
-    Returns:
-        (n_pairs, n, n) heights, mm.
-    """
-    dx = ig.grid.size[0] / ig.grid.shape[0]
-    dy = ig.grid.size[1] / ig.grid.shape[1]
-    off = (np.arange(n) + 0.5) * side / n - side / 2
-    px = pair_xy[:, 0, None, None] + off[None, :, None]
-    py = pair_xy[:, 1, None, None] + off[None, None, :]
-    px, py = np.broadcast_arrays(px, py)
-    # fractional grid index of a point: (x − x0)/dx − 1/2 (cell-centred grid)
-    ix = (px - ig.origin[0]) / dx - 0.5
-    iy = (py - ig.origin[1]) / dy - 0.5
-    out = map_coordinates(z, [ix.ravel(), iy.ravel()], order=1, mode="nearest")
-    return out.reshape(len(pair_xy), n, n)

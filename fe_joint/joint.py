@@ -1,0 +1,147 @@
+"""The joint as the dynamics sees it: one friction element per matched pair, and its linear limit.
+
+A :class:`JointModel` holds, per element, the preload normal force N0, the initial gap, the
+contact stiffnesses per unit area (k_n, k_t in N/mm³, as the paper states them) and the
+tributary area; element stiffnesses are k·A (N/mm). This module also gives the *stuck* linear
+limit of the joint (every loaded element a linear spring), which sets the sweep band, the
+small-excitation check and the choice of excitation levels.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+
+
+@dataclass
+class JointModel:
+    """Friction-element parameters of one configuration.
+
+    Attributes:
+        name: configuration ('baseline', 'smooth-ms', 'v1', 'v2', 'v3', 'v3-rq5', …).
+        n0: (ne,) preload normal force, N.
+        gap: (ne,) initial gap, mm (0 for loaded elements).
+        kn, kt: (ne,) normal and tangential contact stiffness per unit area, N/mm³.
+        area: (ne,) tributary area, mm².
+        rq_um: composite roughness of the surface behind it (None: smooth FE preload).
+        info: extra per-configuration data for the report (contact fraction, …).
+    """
+    name: str
+    n0: np.ndarray
+    gap: np.ndarray
+    kn: np.ndarray
+    kt: np.ndarray
+    area: np.ndarray
+    rq_um: float | None = None
+    info: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        ne = len(self.area)
+        for k in ("n0", "gap", "kn", "kt"):
+            v = np.asarray(getattr(self, k), float)
+            if v.shape != (ne,) or not np.all(np.isfinite(v)) or np.any(v < 0):
+                raise ValueError(f"JointModel.{k}: expected {ne} finite values ≥ 0")
+            setattr(self, k, v)
+
+    @property
+    def closed(self) -> np.ndarray:
+        """Elements carrying preload (N0 > 0)."""
+        return self.n0 > 0
+
+    def k_eq(self, which: str = "kn") -> float:
+        """Equivalent stiffness Σ k_i A_i / Σ A_i over all elements, N/mm³ (paper Figs. 15, 19)."""
+        k = getattr(self, which)
+        return float(np.sum(k * self.area) / np.sum(self.area))
+
+
+def stuck_stiffness(K: np.ndarray, pair_dofs: np.ndarray, joint: JointModel) -> np.ndarray:
+    """Stiffness of the structure with every loaded element stuck (linear springs).
+
+    Args:
+        K: (n, n) reduced stiffness without the joint.
+        pair_dofs: (ne, 2, 3) reduced DOFs of sides A and B for (t1, t2, n); the interface frame
+            is the global one (z normal), so the element frame needs no rotation.
+        joint: the configuration.
+    Returns:
+        (n, n) stiffness including k_t·A (t1, t2) and k_n·A (n) of every element with N0 > 0.
+    """
+    Ks = np.array(K, dtype=float, copy=True)
+    c = joint.closed
+    k = np.stack([joint.kt, joint.kt, joint.kn], axis=1)[c] * joint.area[c, None]   # (nc, 3)
+    a = pair_dofs[c, 0, :].ravel()
+    b = pair_dofs[c, 1, :].ravel()
+    kv = k.ravel()
+    np.add.at(Ks, (a, a), kv)
+    np.add.at(Ks, (b, b), kv)
+    np.add.at(Ks, (a, b), -kv)
+    np.add.at(Ks, (b, a), -kv)
+    return Ks
+
+
+@dataclass
+class LinearJoint:
+    """Modes of the structure with the joint stuck."""
+    frequencies: np.ndarray     # (m,) Hz, ascending (rigid-body modes ≈ 0 first)
+    modes: np.ndarray           # (n, m) mass-normalized
+    mode_index: int             # index of the breathing mode (first elastic mode)
+
+    @property
+    def frequency(self) -> float:
+        """Breathing-mode frequency, Hz."""
+        return float(self.frequencies[self.mode_index])
+
+
+def stuck_modes(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: JointModel,
+                n_modes: int = 10) -> LinearJoint:
+    """Lowest modes of the stuck structure; the breathing mode is the first elastic one.
+
+    Rigid-body modes are recognised as those below 1 % of the highest computed frequency's
+    hundredth (free–free structure: six of them).
+    """
+    Ks = stuck_stiffness(K, pair_dofs, joint)
+    n = Ks.shape[0]
+    w2, phi = sla.eigh(Ks, M, subset_by_index=[0, min(n_modes, n) - 1])
+    f = np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi)
+    elastic = np.nonzero(f > 1e-4 * f[-1] + 1.0)[0]
+    if len(elastic) == 0:
+        raise ValueError("stuck joint: no elastic mode among the computed ones")
+    return LinearJoint(frequencies=f, modes=phi, mode_index=int(elastic[0]))
+
+
+def slip_onset(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: JointModel,
+               excitation_dof: int, damping_ratio: float, mu: float,
+               lin: LinearJoint | None = None) -> dict:
+    """Linear estimate of the excitation at which elements start to slip, at resonance.
+
+    With the joint stuck and modal damping ζ, the resonant response to a unit force is
+    φ_r (φ_r·e)/(2ζω_r²). An element slips once its tangential force k_t A |u_t| reaches μN0,
+    so its onset force is μN0 / (k_t A |u_t|). The whole joint slips (macroslip) once the net
+    tangential force reaches μ ΣN0. Friction damping caps the real response, so these are
+    lower bounds of what the nonlinear model needs — used only to place the excitation levels.
+
+    Returns:
+        dict: ``onset`` (ne,) N (inf for unloaded elements), ``macroslip`` N,
+        ``first_slip`` N, ``quantile(q)`` callable: the force at which a fraction q of the
+        loaded contact area slips.
+    """
+    lin = lin or stuck_modes(K, M, pair_dofs, joint)
+    r = lin.mode_index
+    phi = lin.modes[:, r]
+    w = 2 * np.pi * lin.frequencies[r]
+    x = phi * phi[excitation_dof] / (2 * damping_ratio * w * w)      # amplitude per N
+    ut = x[pair_dofs[:, 0, :2]] - x[pair_dofs[:, 1, :2]]            # (ne, 2)
+    tang = joint.kt * joint.area * np.hypot(ut[:, 0], ut[:, 1])
+    c = joint.closed
+    onset = np.full(len(c), np.inf)
+    onset[c] = mu * joint.n0[c] / np.maximum(tang[c], 1e-300)
+    net = np.abs(np.sum((joint.kt * joint.area)[c] * ut[c, 0]))
+    macroslip = mu * joint.n0.sum() / max(net, 1e-300)
+    order = np.argsort(onset[c])
+    cum = np.cumsum(joint.area[c][order]) / joint.area[c].sum()
+
+    def quantile(q: float) -> float:
+        return float(onset[c][order][min(np.searchsorted(cum, q), len(order) - 1)])
+
+    return {"onset": onset, "macroslip": float(macroslip), "first_slip": float(onset[c].min()),
+            "quantile": quantile, "frequency": lin.frequency}
