@@ -28,17 +28,17 @@ def _registry(calls: list, kill_at: str | None = None) -> dict:
 def test_rerun_skips_finished_stages(tmp_path: Path) -> None:
     case = load_case(preset="quick")
     calls: list = []
-    # a run killed in 'reduce': mesh and preload are finished and logged
+    # a run killed in 'contact': mesh and fe are finished and logged
     with pytest.raises(Killed):
-        run_stages(case, tmp_path, ("contact",), _registry(calls, kill_at="reduce"))
-    assert calls == ["mesh", "preload"]
+        run_stages(case, tmp_path, ("dynamics",), _registry(calls, kill_at="contact"))
+    assert calls == ["mesh", "fe"]
     calls.clear()
-    run_stages(case, tmp_path, ("contact",), _registry(calls))
-    assert calls == ["reduce", "contact"]          # resumed where it stopped
+    run_stages(case, tmp_path, ("dynamics",), _registry(calls))
+    assert calls == ["contact", "dynamics"]          # resumed where it stopped
     log = read_stage_log(tmp_path)
     assert [(e["stage"], e["action"]) for e in log] == [
-        ("mesh", "ran"), ("preload", "ran"), ("mesh", "cached"), ("preload", "cached"),
-        ("reduce", "ran"), ("contact", "ran")]
+        ("mesh", "ran"), ("fe", "ran"), ("mesh", "cached"), ("fe", "cached"),
+        ("contact", "ran"), ("dynamics", "ran")]
 
 
 def test_changed_section_reruns_downstream_only(tmp_path: Path) -> None:

@@ -1,0 +1,132 @@
+"""Frequency responses of the reduced resonator with a friction element per active pair.
+
+Thin layer between the study (``multiscale``) and the ``hbm`` package: it turns a
+:class:`~fe_joint.joint.JointModel` into ``FrictionContacts`` (element stiffness = k · area; only
+the elements with a contact stiffness are modelled), runs one FRF by continuation, and keeps what
+the report needs at resonance — per-element status, dissipated energy, cycle-mean normal load,
+tangential force amplitude and loops — as plain arrays (:class:`CurveResult`, saved as ``.npz``).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hbm import FrictionContacts, HarmonicBalance, LinearStructure
+
+from .joint import JointModel
+
+OPEN = 4   # status code of elements left out of the dynamics (hbm's OPEN)
+
+
+def structure(rm) -> LinearStructure:
+    """The reduced linear structure; modal damping applies to the modes of the stuck assembly."""
+    return LinearStructure(rm.M, rm.K, damping_ratio=rm.damping_ratio)
+
+
+def contacts(rm, joint: JointModel, mu: float) -> tuple[FrictionContacts, np.ndarray]:
+    """Friction elements of the active pairs (k_n, k_t > 0) and their indices."""
+    act = np.nonzero((joint.kn > 0) & (joint.kt > 0))[0]
+    if len(act) == 0:
+        raise ValueError(f"configuration {joint.name}: no pair has a contact stiffness")
+    A = joint.area[act]
+    c = FrictionContacts(np.asarray(rm.pair_dofs)[act], kt=joint.kt[act] * A,
+                         kn=joint.kn[act] * A, mu=mu, n0=joint.n0[act], gap=joint.gap[act])
+    return c, act
+
+
+@dataclass
+class CurveResult:
+    """One FRF and the joint's state at its peak. Arrays over all pairs (ne) unless noted."""
+    config: str
+    level: float                 # N, excitation amplitude on mass A in x
+    omega_hz: np.ndarray         # (p,) Hz
+    amplitude: np.ndarray        # (p,) mm, first harmonic at the response DOF
+    stable: np.ndarray           # (p,) bool
+    peak_hz: float
+    peak_amplitude: float        # mm
+    status: np.ndarray           # (ne,) 0 stuck, 1 stick-slip, 2 gross slip, 3 partly open, 4 open
+    energy: np.ndarray           # (ne,) N·mm per cycle at the peak
+    mean_normal: np.ndarray      # (ne,) N, cycle mean at the peak
+    q_amp: np.ndarray            # (ne, 2) N, tangential force amplitude per direction
+    loop_u: np.ndarray           # (nt,) mm, joint loop: area-weighted mean relative u_x
+    loop_T: np.ndarray           # (nt,) N, joint loop: Σ T_x
+    elem_u: np.ndarray           # (ne, nt) mm, element u_x over the cycle (0 for inactive)
+    elem_T: np.ndarray           # (ne, nt) N, element T_x over the cycle
+    seconds: float
+    newton_iterations: int
+    n_points: int
+    n_active: int
+    n_nonlinear: int             # elements slipping or separating at the peak
+
+    def save(self, path: Path) -> None:
+        tmp = Path(str(path) + ".tmp.npz")
+        np.savez(tmp, **{k: np.asarray(v) for k, v in asdict(self).items()})
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: Path) -> "CurveResult":
+        with np.load(path, allow_pickle=False) as d:
+            kw = {k: d[k] for k in d.files}
+        for k in ("config",):
+            kw[k] = str(kw[k])
+        for k in ("level", "peak_hz", "peak_amplitude", "seconds"):
+            kw[k] = float(kw[k])
+        for k in ("newton_iterations", "n_points", "n_active", "n_nonlinear"):
+            kw[k] = int(kw[k])
+        return cls(**kw)
+
+    @property
+    def dissipated(self) -> float:
+        """Energy dissipated by friction per cycle at the peak, N·mm."""
+        return float(self.energy.sum())
+
+
+def frf(rm, joint: JointModel, level: float, mu: float, f_lin: float, band: tuple[float, float],
+        harmonics: int, samples: int, max_points: int) -> CurveResult:
+    """FRF of one configuration at one excitation level, and the joint state at its peak.
+
+    Args:
+        rm: ReducedModel.
+        joint: the configuration's element parameters.
+        level: excitation amplitude on mass A in x, N.
+        mu: friction coefficient.
+        f_lin: stuck linear frequency of the configuration, Hz (sets the band).
+        band: (low, high) fractions of f_lin swept.
+        harmonics, samples: HBM harmonics and AFT samples per period.
+        max_points: cap on continuation points.
+    """
+    t0 = time.perf_counter()
+    c, act = contacts(rm, joint, mu)
+    hb = HarmonicBalance(structure(rm), c, harmonics=harmonics, samples=samples)
+    force = np.zeros(rm.K.shape[0])
+    force[rm.excitation_dof] = level
+    w0, w1 = 2 * np.pi * f_lin * band[0], 2 * np.pi * f_lin * band[1]
+    res = hb.frf(w0, w1, force, dof=rm.response_dof, max_points=max_points)
+    k = int(np.argmax(res.amplitude))
+    er = hb.element_results(res.solutions[k])
+    ne, nt = len(joint.area), er.T.shape[-1]
+    status = np.full(ne, OPEN, dtype=np.int64)
+    status[act] = er.status
+    energy = np.zeros(ne)
+    energy[act] = er.energy
+    mean_normal = np.zeros(ne)
+    mean_normal[act] = er.mean_normal
+    q_amp = np.zeros((ne, 2))
+    q_amp[act] = 0.5 * (er.T.max(axis=2) - er.T.min(axis=2))
+    elem_u = np.zeros((ne, nt))
+    elem_T = np.zeros((ne, nt))
+    elem_u[act] = er.u_t[:, 0, :]
+    elem_T[act] = er.T[:, 0, :]
+    w = joint.area / joint.area.sum()
+    return CurveResult(
+        config=joint.name, level=float(level), omega_hz=res.omega / (2 * np.pi),
+        amplitude=res.amplitude, stable=np.asarray(res.stable, bool),
+        peak_hz=float(res.omega[k] / (2 * np.pi)), peak_amplitude=float(res.amplitude[k]),
+        status=status, energy=energy, mean_normal=mean_normal, q_amp=q_amp,
+        loop_u=(w[:, None] * elem_u).sum(axis=0), loop_T=elem_T.sum(axis=0),
+        elem_u=elem_u, elem_T=elem_T, seconds=time.perf_counter() - t0,
+        newton_iterations=int(res.newton_iterations), n_points=len(res.omega),
+        n_active=len(act), n_nonlinear=int(np.sum(er.status > 0)))
