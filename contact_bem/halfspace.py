@@ -17,8 +17,10 @@ tangential stiffness of a stuck circle is 8 G* a with G* = G/(2(2-ν)). Because 
 
 Non-periodic grids use DC-FFT (Liu, Wang & Liu 2000): the kernel is sampled on a (2nx, 2ny) wrapped
 grid and the field zero-padded, which gives the exact linear (non-circular) convolution.
-Periodic grids use the exact Fourier multipliers of the continuous half-space,
-``2/(E*|k|)`` and ``(2/(G|k|)) (δ_αβ - ν k_α k_β/|k|²)``, with the k = 0 term set to zero (the mean
+Periodic grids use the Fourier multipliers of the continuous half-space,
+``2/(E*|k|)`` and ``(2/(G|k|)) (δ_αβ - ν k_α k_β/|k|²)``, times the cell shape factor and summed over
+aliases, i.e. the periodic image sum of the same cell influence coefficients (so periodic and
+non-periodic results differ only by periodicity), with the k = 0 term set to zero (the mean
 displacement of a periodic problem is undefined; only relative values matter).
 
 FFTs use pyFFTW with plans built once per array shape and reused (threads configurable); without
@@ -123,6 +125,7 @@ class ElasticHalfSpace:
         threads: FFTW threads (>= 1).
         planner: FFTW planner effort ('FFTW_ESTIMATE', 'FFTW_MEASURE', ...); plans are made once per
             array shape (batch size) and reused.
+        alias_terms: M of the periodic alias sum (periodic only; see ``_build_spectra``).
 
     Attributes:
         e_star: composite modulus E/(2(1-ν²)) (MPa).
@@ -131,7 +134,7 @@ class ElasticHalfSpace:
     """
 
     def __init__(self, grid: Grid, young: float = 198400.0, poisson: float = 0.3, periodic: bool = False,
-                 threads: int = 1, planner: str = "FFTW_MEASURE"):
+                 threads: int = 1, planner: str = "FFTW_MEASURE", alias_terms: int = 4):
         if not isinstance(grid, Grid):
             raise ValueError(f"grid: expected a contact_bem.Grid, got {type(grid).__name__}")
         self.grid = grid
@@ -144,6 +147,9 @@ class ElasticHalfSpace:
             raise ValueError(f"threads: must be >= 1, got {threads!r}")
         self.threads = int(threads)
         self.planner = str(planner)
+        if int(alias_terms) < 0:
+            raise ValueError(f"alias_terms: must be >= 0, got {alias_terms!r}")
+        self.alias_terms = int(alias_terms)
         nu = self.poisson
         self.e_star = self.young / (2.0 * (1.0 - nu ** 2))
         self.shear_modulus = self.young / (2.0 * (1.0 + nu))
@@ -158,18 +164,35 @@ class ElasticHalfSpace:
         nx, ny = self.grid.shape
         px, py = self.padded_shape
         if self.periodic:
-            kx = 2 * np.pi * np.fft.fftfreq(nx, self.grid.dx)[:, None]
-            ky = 2 * np.pi * np.fft.rfftfreq(ny, self.grid.dy)[None, :]
-            k = np.hypot(kx, ky)
-            inv_k = np.divide(1.0, k, out=np.zeros_like(k), where=k > 0)
+            # Periodic sum of the same cell influence coefficients, done spectrally: the continuous
+            # multiplier times the cell shape factor sinc(k_x dx/2) sinc(k_y dy/2), summed over the
+            # aliases k + 2π(m/dx, n/dy), |m|, |n| ≤ M (collocation at cell centres). Without the
+            # alias sum the periodic operator is a different discretisation from the DC-FFT one and
+            # rough contact areas differ by ~10 % at 3 cells per correlation length.
+            dx, dy = self.grid.dx, self.grid.dy
+            kx0 = 2 * np.pi * np.fft.fftfreq(nx, dx)[:, None]
+            ky0 = 2 * np.pi * np.fft.rfftfreq(ny, dy)[None, :]
             nu, g = self.poisson, self.shear_modulus
-            kx2 = kx ** 2 * inv_k ** 2
-            ky2 = ky ** 2 * inv_k ** 2
-            kxy = kx * ky * inv_k ** 2
-            self._zz = 2.0 / self.e_star * inv_k
-            self._xx = 2.0 / g * inv_k * (1.0 - nu * kx2)
-            self._yy = 2.0 / g * inv_k * (1.0 - nu * ky2)
-            self._xy = -2.0 / g * inv_k * nu * kxy
+            shp = np.broadcast(kx0, ky0).shape
+            zz, xx, yy, xy = (np.zeros(shp) for _ in range(4))
+            M = self.alias_terms
+            for m in range(-M, M + 1):
+                kx = kx0 + 2 * np.pi * m / dx
+                sx = np.sinc(kx * dx / (2 * np.pi))
+                for n in range(-M, M + 1):
+                    ky = ky0 + 2 * np.pi * n / dy
+                    k2 = kx * kx + ky * ky
+                    inv_k = np.divide(1.0, np.sqrt(k2), out=np.zeros(shp), where=k2 > 0)
+                    w = sx * np.sinc(ky * dy / (2 * np.pi)) * inv_k
+                    inv_k2 = inv_k * inv_k
+                    zz += w
+                    xx += w * (1.0 - nu * kx * kx * inv_k2)
+                    yy += w * (1.0 - nu * ky * ky * inv_k2)
+                    xy -= w * nu * kx * ky * inv_k2
+            self._zz = 2.0 / self.e_star * zz
+            self._xx = 2.0 / g * xx
+            self._yy = 2.0 / g * yy
+            self._xy = 2.0 / g * xy
         else:
             ix = np.arange(px)
             iy = np.arange(py)
