@@ -92,7 +92,7 @@ def _force_correct(q, R, S, loaded, Q, A, n_pass: int = 3):
 
 def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndarray, Q: np.ndarray,
                         cell_area: float, *, tol: float = 1e-8, max_iter: int = 2000,
-                        raise_on_fail: bool = True) -> dict:
+                        raise_on_fail: bool = True, omega: np.ndarray | None = None) -> dict:
     """Batched partial-slip increment (internal; inputs already validated, |Q| < μP).
 
     Args:
@@ -131,9 +131,10 @@ def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndar
     # safeguard: slip-cell moves use the CG step times omega; a diverging entry restarts from its
     # best iterate with omega halved (the degenerate stick/slip boundary at a load reversal can
     # otherwise make the projected moves of the slip cells oscillate)
-    omega = np.ones(B)
+    omega = np.ones(B) if omega is None else np.asarray(omega, float).copy()
     best_err = np.full(B, np.inf)
     best_q = q.copy()
+    stall = np.zeros(B, dtype=int)
     tau_self = 0.5 / abs(apply_kt(_unit(q.shape[2:]))[0, 0, 0, 0])
     for it in range(max_iter + 1):
         g = u + s_prev
@@ -142,7 +143,10 @@ def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndar
         SL = loaded & ~S
         nS = S.sum(axis=_AX)
         gbar = np.where(S[:, None], g, 0.0).sum(axis=_AX) / np.maximum(nS, 1)[:, None]
-        delta = np.where((active & (nS > 0))[:, None], gbar, delta)
+        # no stick cell (transient near μP): the R-weighted mean over the loaded cells, so that the
+        # cells lagging behind the rigid shift are released back into stick
+        gall = (R[:, None] * g).sum(axis=_AX) / Rw[:, None]
+        delta = np.where(active[:, None], np.where((nS > 0)[:, None], gbar, gall), delta)
         g = g - delta[:, :, None, None]
         # --- KKT residual of the current iterate ---
         qhat = q / np.where(qn > 0, qn, 1.0)[:, None]
@@ -159,10 +163,12 @@ def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndar
             print(it, err, omega, S.sum(axis=_AX), SL.sum(axis=_AX), delta[0])
         if not active.any() or it == max_iter:
             break
-        improved = active & (err < best_err)
+        improved = active & (err < 0.999 * best_err)
         best_err = np.where(improved, err, best_err)
         best_q = np.where(improved[:, None, None, None], q, best_q)
-        diverged = active & (err > 100.0 * best_err) & (omega > 1e-3)
+        stall = np.where(improved, 0, stall + 1)
+        diverged = active & ((err > 100.0 * best_err) | (stall > 40)) & (omega > 1e-4)
+        stall = np.where(diverged, 0, stall)
         if diverged.any():
             omega = np.where(diverged, 0.5 * omega, omega)
             q = np.where(diverged[:, None, None, None], best_q, q)
@@ -203,7 +209,7 @@ def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndar
     qn = np.sqrt(q[:, 0] ** 2 + q[:, 1] ** 2)
     stick = loaded & (qn < R * (1 - 1e-10))
     return {"traction": q, "displacement": u, "shift": delta, "stick": stick,
-            "iterations": iters, "residual": err, "converged": ~active}
+            "iterations": iters, "residual": err, "converged": ~active, "omega": omega}
 
 
 def pk_tangential_compacting(apply_kt, R, s_prev, q0, Q, cell_area, *, tol: float = 1e-6,
@@ -219,15 +225,18 @@ def pk_tangential_compacting(apply_kt, R, s_prev, q0, Q, cell_area, *, tol: floa
     idx = np.arange(B)
     q_cur = q0
     done_it = 0
+    n_it = chunk
     while True:
         res = pk_tangential_batch(apply_kt, R[idx], s_prev[idx], q_cur[idx] if q_cur.shape[0] == B else q_cur,
-                                  Q[idx], cell_area, tol=tol, max_iter=chunk, raise_on_fail=False)
+                                  Q[idx], cell_area, tol=tol, max_iter=n_it, raise_on_fail=False,
+                                  omega=None if out is None else out["omega"][idx])
         if out is None:
             out = {k: v.copy() for k, v in res.items()}
         else:
             for k, v in res.items():
                 out[k][idx] = v if k != "iterations" else out[k][idx] + v
-        done_it += chunk
+        done_it += n_it
+        n_it = 3 * chunk  # later rounds long enough for the stall safeguard to act
         conv = res["converged"]
         if conv.all():
             return out
