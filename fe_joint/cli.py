@@ -72,6 +72,8 @@ def _fail(msg: str, code: int) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``fe-joint`` console script; returns the exit status."""
+    import logging
+    logging.basicConfig(level=logging.WARNING)   # FFCx's JIT logs every compile at INFO otherwise
     args = _parser().parse_args(argv)
     try:
         return _dispatch(args)

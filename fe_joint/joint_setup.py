@@ -166,10 +166,10 @@ def assemble_joint(fe, material: Material, degree: int = 2, with_mass: bool = Tr
 
 def shank_axial_force(problem: JointProblem, u, eigenstrain: float) -> float:
     """Axial force in the free span of the shank, N: A_shank * mean(sigma_zz) over the shank cells
-    whose centroid lies within L/4 of the interface plane z = 0.
+    whose centroid lies between the nut (marker 5) and the head (marker 4).
 
     The shank sides are traction-free between head and nut, so the section force is the same on
-    every cross-section there; the volume mean of sigma_zz over a slice times the section area
+    every cross-section there; the volume mean of sigma_zz over that span times the section area
     (shank volume / length) measures it independently of the contact forces. The parts of the
     shank inside the nut/head are excluded (the force is handed over there).
     """
@@ -180,10 +180,14 @@ def shank_axial_force(problem: JointProblem, u, eigenstrain: float) -> float:
     comm = mesh.comm
     tags = problem.fe.cell_tags
     cells = tags.indices[tags.values == SHANK_MARKER]
+    data = problem.fe.data
+    pts, cm = np.asarray(data.points), np.asarray(data.cell_markers)
+    z_lo = pts[np.unique(np.asarray(data.cells)[cm == 5]), 2].max() if np.any(cm == 5) else -np.inf
+    z_hi = pts[np.unique(np.asarray(data.cells)[cm == 4]), 2].min() if np.any(cm == 4) else np.inf
     W = fem.FunctionSpace(mesh, ("DG", 0))
     zc = fem.Function(W)
     zc.interpolate(lambda x: x[2])
-    slab = cells[np.abs(zc.x.array[cells]) < problem.shank_length / 4]
+    slab = cells[(zc.x.array[cells] > z_lo) & (zc.x.array[cells] < z_hi)]
     ind = fem.Function(W)
     ind.x.array[:] = 0.0
     ind.x.array[slab] = 1.0

@@ -89,15 +89,44 @@ def solve_eigenproblem(K: PETSc.Mat, M: PETSc.Mat, nev: int, sigma: float = 0.0,
     vals = np.array([eps.getEigenvalue(i).real for i in range(nconv)])
     order = np.argsort(vals)[:nev]
     vecs = []
-    Mv = K.createVecLeft()
     for i in order:
         v = K.createVecRight()
         eps.getEigenvector(int(i), v)
-        M.mult(v, Mv)
-        v.scale(1.0 / np.sqrt(v.dot(Mv)))
         vecs.append(v)
     eps.destroy()
-    return vals[order], vecs
+    return rayleigh_ritz(K, M, vecs)
+
+
+def rayleigh_ritz(K: PETSc.Mat, M: PETSc.Mat, vecs: list) -> tuple[np.ndarray, list]:
+    """Re-orthonormalize converged eigenvectors: eigh(Φᵀ K Φ, Φᵀ M Φ) on the small subspace.
+
+    SLEPc's vectors are M-orthogonal only to about its residual tolerance (1e-8 here); one
+    Rayleigh–Ritz step makes Φᵀ M Φ = I to round-off without changing the eigenvalues.
+
+    Returns:
+        (eigenvalues ascending, list of Vecs).
+    """
+    import scipy.linalg as sla
+    comm = K.getComm().tompi4py()
+    X = np.stack([v.getArray(readonly=True) for v in vecs], axis=1)
+    KX, MX = np.empty_like(X), np.empty_like(X)
+    tmp = K.createVecLeft()
+    for j, v in enumerate(vecs):
+        K.mult(v, tmp)
+        KX[:, j] = tmp.getArray(readonly=True)
+        M.mult(v, tmp)
+        MX[:, j] = tmp.getArray(readonly=True)
+    A, B = X.T @ KX, X.T @ MX
+    comm.Allreduce(MPI.IN_PLACE, A, op=MPI.SUM)
+    comm.Allreduce(MPI.IN_PLACE, B, op=MPI.SUM)
+    lam, Y = sla.eigh(0.5 * (A + A.T), 0.5 * (B + B.T))
+    Z = X @ Y
+    out = []
+    for j in range(Z.shape[1]):
+        v = K.createVecRight()
+        v.getArray()[:] = Z[:, j]
+        out.append(v)
+    return lam, out
 
 
 def to_hz(eigenvalues: np.ndarray) -> np.ndarray:

@@ -133,10 +133,12 @@ def patch_loads(setup: InterfaceSetup, element_force: np.ndarray) -> np.ndarray:
 
 
 def rough_contact(setup: InterfaceSetup, rq_um: float, corr_length: float, seed: int,
-                  hardness: float = 0.0, comm=None, tol: float = 1e-8) -> SurfaceContact:
+                  hardness: float = 0.0, comm=None, tol: float = 1e-8,
+                  stiffness: bool = True) -> SurfaceContact:
     """Global rough contact with the equivalent macro gap, then k_n per element from its patch.
 
     With ``rq_um = 0`` the global solve returns the smooth FE pressure (the coupling test).
+    ``stiffness=False`` skips the element patches (k_n, k_t are then zero).
     """
     t0 = time.perf_counter()
     ig = setup.ig
@@ -147,7 +149,8 @@ def rough_contact(setup: InterfaceSetup, rq_um: float, corr_length: float, seed:
                       hardness=hardness if hardness > 0 else None)
     t1 = time.perf_counter()
     el = element_loads(ig, ns.pressure, ns.gap, setup.area, setup.bolt_force)
-    kn = element_normal_stiffness(setup, z, el["n0"], comm=comm)
+    kn = (element_normal_stiffness(setup, z, el["n0"], comm=comm) if stiffness
+          else np.zeros(len(setup.area)))
     t2 = time.perf_counter()
     usable = ig.mask.sum()
     return SurfaceContact(
@@ -224,3 +227,44 @@ def joint_v2(setup: InterfaceSetup, sc: SurfaceContact, name: str = "v2") -> Joi
 def active(joint: JointModel) -> np.ndarray:
     """Elements the dynamics needs: those with a contact stiffness (k_n, k_t > 0)."""
     return (joint.kn > 0) & (joint.kt > 0)
+
+
+def save_surfaces(path, surfaces: dict[float, SurfaceContact], extra: dict | None = None) -> None:
+    """Write surface contacts (keyed by Rq in µm) and extra arrays to one ``.npz`` (rank 0)."""
+    import json
+    from dataclasses import asdict
+    out = {}
+    for rq, sc in surfaces.items():
+        for k, v in asdict(sc).items():
+            out[f"{rq:g}/{k}"] = np.asarray(json.dumps(v) if k == "seconds" else v)
+    for k, v in (extra or {}).items():
+        out[f"extra/{k}"] = np.asarray(v)
+    tmp = str(path) + ".tmp.npz"
+    np.savez(tmp, **out)
+    import os
+    os.replace(tmp, path)
+
+
+def load_surfaces(path) -> tuple[dict[float, SurfaceContact], dict]:
+    """Read what :func:`save_surfaces` wrote: ({rq_um: SurfaceContact}, extra arrays)."""
+    import json
+    from dataclasses import fields
+    names = {f.name for f in fields(SurfaceContact)}
+    raw: dict[str, dict] = {}
+    extra = {}
+    with np.load(path) as d:
+        for key in d.files:
+            head, k = key.split("/", 1)
+            if head == "extra":
+                extra[k] = d[key]
+                continue
+            raw.setdefault(head, {})[k] = d[key]
+    surfaces = {}
+    for head, kw in raw.items():
+        kw = {k: v for k, v in kw.items() if k in names}
+        kw["seconds"] = json.loads(str(kw["seconds"]))
+        for k in ("rq_um", "contact_fraction", "load_scale"):
+            kw[k] = float(kw[k])
+        kw["iterations"] = int(kw["iterations"])
+        surfaces[float(head)] = SurfaceContact(**kw)
+    return surfaces, extra

@@ -22,3 +22,187 @@ def stage_mesh(ctx: StageContext) -> dict:
 REGISTRY = {
     "mesh": stage_mesh,
 }
+
+
+def stage_fe(ctx: StageContext) -> dict:
+    """Bolt preload with smooth interface contact, free–free modes and Craig–Bampton → ReducedModel."""
+    import dataclasses
+
+    import numpy as np
+
+    from .elasticity import Material
+    from .reduction import build_reduced_model
+    c = ctx.case
+    rm = build_reduced_model(c.geometry, Material(**dataclasses.asdict(c.material)),
+                             c.preload.bolt_force, c.reduction.damping_ratio, c.reduction.cutoff_hz,
+                             comm=ctx.comm, out_dir=str(ctx.path("fe")),
+                             n_full_elastic=c.reduction.n_check_modes + 2)
+    full = np.asarray(rm.full_frequencies)
+    red = np.asarray(rm.reduced_frequencies)
+    fe_el = full[full > 1.0][: c.reduction.n_check_modes]
+    rd_el = red[red > 1.0][: len(fe_el)]
+    err = np.abs(rd_el - fe_el) / fe_el
+    summary = {
+        "n_reduced_dofs": int(rm.n_dofs), "n_pairs": int(rm.n_pairs), "n_boundary": int(rm.n_boundary),
+        "bolt_force": float(np.sum(rm.preload_normal_force)),
+        "closed_pairs": int(np.sum(rm.preload_status != 0)),
+        "full_elastic_hz": fe_el.tolist(), "reduced_elastic_hz": rd_el.tolist(),
+        "max_rel_freq_error": float(err.max()) if len(err) else None,
+        "timings": {k: v for k, v in rm.metadata.get("timings", {}).items()},
+    }
+    ctx.print(f"[fe-joint] fe: {rm.n_dofs} reduced DOFs, {rm.n_pairs} pairs "
+              f"({summary['closed_pairs']} closed), first elastic f = {fe_el[0]:.2f} Hz, "
+              f"reduced vs full ≤ {summary['max_rel_freq_error']:.1e}")
+    return summary
+
+
+REGISTRY["fe"] = stage_fe
+
+
+def _reduced_model(ctx: StageContext):
+    from .reduced_model import ReducedModel
+    return ReducedModel.load(str(ctx.path("fe", "reduced_model.h5")))
+
+
+def stage_contact(ctx: StageContext) -> dict:
+    """Rough contact: FE → BEM coupling check, global solve and element k_n for every surface."""
+    import numpy as np
+
+    from . import multiscale as ms
+    c = ctx.case
+    r = c.roughness
+    rm = _reduced_model(ctx)
+    setup = ms.interface_setup(rm, c.geometry, c.material, r)
+    # zero roughness must give back the smooth FE pressure (equivalent macro gap)
+    flat = ms.rough_contact(setup, 0.0, r.corr_length, r.seed, comm=ctx.comm, stiffness=False)
+    coupling_err = float(np.abs(flat.pressure - setup.p_s).max() / setup.p_s.max())
+    rqs = sorted(set(r.rq_um) | {r.v_rq_um})
+    surfaces = {}
+    for rq in rqs:
+        surfaces[rq] = ms.rough_contact(setup, rq, r.corr_length, r.seed, hardness=r.hardness,
+                                        comm=ctx.comm)
+        ctx.print(f"[fe-joint] contact: Rq = {rq:g} µm: contact fraction "
+                  f"{100 * surfaces[rq].contact_fraction:.2f} %, {surfaces[rq].iterations} iterations, "
+                  f"k_n mean {np.mean(surfaces[rq].kn):.3g} N/mm³")
+    # smooth-ms: FE loads, k_n on patches of the nearly smooth realization
+    import time
+    t0 = time.perf_counter()
+    z_smooth = ms.surface(setup, r.smooth_rq_um, r.corr_length, r.seed)
+    kn_smooth = ms.element_normal_stiffness(setup, z_smooth, setup.n0_fe, comm=ctx.comm)
+    t_smooth = time.perf_counter() - t0
+    if ctx.rank == 0:
+        ctx.path("contact").mkdir(parents=True, exist_ok=True)
+        ms.save_surfaces(ctx.path("contact", "surfaces.npz"), surfaces, extra={
+            "kn_smooth": kn_smooth, "p_s": setup.p_s, "g_s": setup.g_s, "mask": setup.ig.mask,
+            "flat_pressure": flat.pressure})
+    return {
+        "coupling_rel_error": coupling_err, "pressure_interpolation_scale": setup.pressure_scale,
+        "grid": r.grid, "patch": r.patch, "patch_side_mm": setup.side,
+        "surfaces": {f"{rq:g}": {"contact_fraction": s.contact_fraction, "iterations": s.iterations,
+                                 "kn_mean": float(np.mean(s.kn)), "kn_max": float(np.max(s.kn)),
+                                 "load_scale": s.load_scale,
+                                 "loaded_elements": int(np.sum(s.n0 > 0)), "seconds": s.seconds}
+                     for rq, s in surfaces.items()},
+        "smooth": {"rq_um": r.smooth_rq_um, "kn_mean": float(np.mean(kn_smooth)),
+                   "kn_max": float(np.max(kn_smooth)), "seconds": t_smooth},
+    }
+
+
+REGISTRY["contact"] = stage_contact
+
+
+def stage_dynamics(ctx: StageContext) -> dict:
+    """FRFs of every configuration and level, the v3 fixed point and the Rq sweep (HBM)."""
+    import numpy as np
+
+    from . import multiscale as ms
+    from . import study
+    from .dynamics import CurveResult
+    from .joint import stuck_modes
+    c = ctx.case
+    rm = _reduced_model(ctx)
+    setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
+    surfaces, extra = ms.load_surfaces(ctx.path("contact", "surfaces.npz"))
+    joints = study.fixed_joints(setup, surfaces, extra["kn_smooth"], c)
+    f_lin = {name: stuck_modes(rm.K, rm.M, rm.pair_dofs, j).frequency for name, j in joints.items()}
+    levels, level_info = study.choose_levels(rm, joints["baseline"], c)
+    inp = study.StudyInputs(rm=rm, setup=setup, surfaces=surfaces, kn_smooth=extra["kn_smooth"],
+                            joints=joints, levels=levels, f_lin=f_lin, case=c)
+    folder = ctx.path("dynamics")
+    study.prepare_folder(folder, ctx.keys["dynamics"], ctx.rank, ctx.comm)
+    jobs = study.jobs_for(c, levels)
+    # the small-excitation check: far below first slip the FRF peak is the stuck linear mode
+    tiny = study.Job(name="check-linear@tiny", kind="curve", config="baseline", level_index=0)
+    inp_tiny = study.StudyInputs(**{**inp.__dict__, "levels": [level_info["first_slip"] * 1e-3]})
+    ctx.print(f"[fe-joint] dynamics: levels {', '.join(f'{x:.3g}' for x in levels)} N "
+              f"(macroslip estimate {level_info['macroslip']:.3g} N), {len(jobs)} jobs")
+    bar = None
+    if ctx.rank == 0 and ctx.progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(jobs) + 1, desc="dynamics", unit="job")
+    tick = (lambda job: bar.update(1)) if bar is not None else None
+    study.run_jobs(inp_tiny, [tiny], folder, ctx.comm, tick)
+    study.run_jobs(inp, jobs, folder, ctx.comm, tick)
+    if bar is not None:
+        bar.close()
+    summary: dict = {"levels": levels, "level_info": level_info, "f_lin": f_lin, "curves": {},
+                     "v3": {}}
+    if ctx.rank == 0:
+        import json
+        for f in sorted(folder.glob("*.npz")):
+            if f.name.endswith(".arrays.npz"):
+                continue
+            cr = CurveResult.load(f)
+            summary["curves"][f.stem] = {
+                "config": cr.config, "level": cr.level, "peak_hz": cr.peak_hz,
+                "peak_amplitude": cr.peak_amplitude, "dissipated": cr.dissipated,
+                "n_active": cr.n_active, "n_nonlinear": cr.n_nonlinear, "n_points": cr.n_points,
+                "seconds": cr.seconds, "status_counts": np.bincount(cr.status, minlength=5).tolist(),
+                "unstable_points": int(np.sum(~cr.stable))}
+        for f in sorted(folder.glob("v3-*.json")):
+            summary["v3"][f.stem] = json.loads(f.read_text())
+        t = summary["curves"]["check-linear@tiny"]
+        summary["linear_peak_rel_error"] = abs(t["peak_hz"] - f_lin["baseline"]) / f_lin["baseline"]
+    if ctx.comm is not None:
+        summary = ctx.comm.bcast(summary, root=0)
+    return summary
+
+
+REGISTRY["dynamics"] = stage_dynamics
+
+
+def stage_report(ctx: StageContext) -> dict:
+    """Figures, report.md, summary.json; plus the speed-against-error tables (rank 0)."""
+    from . import speed_error
+    from .report import write_report
+    from .stages import read_manifest
+    c = ctx.case
+    summaries = {s: (read_manifest(ctx.out, s) or {}).get("summary", {}) for s in
+                 ("mesh", "fe", "contact", "dynamics")}
+    summary = None
+    if ctx.rank == 0:
+        import numpy as np
+
+        from . import multiscale as ms
+        from .dynamics import CurveResult
+        rm = _reduced_model(ctx)
+        grids = (64, 128, 256, 512) if c.roughness.grid >= 256 else (32, 64, c.roughness.grid * 2)
+        speed = {"global BEM grid (Rq = %g µm)" % c.roughness.v_rq_um: speed_error.bem_grid(rm, c, grids)}
+        dyn = summaries["dynamics"]
+        top = len(dyn["levels"]) - 1
+        base = ctx.path("dynamics", f"baseline@L{top}.npz")
+        if base.exists():
+            cr = CurveResult.load(base)
+            setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
+            joint = ms.joint_baseline(setup, c.contact.k_ref)
+            hs = (1, 3, 5) if c.dynamics.harmonics <= 3 else (1, 3, 5, 7)
+            speed.update(speed_error.hbm_knobs(rm, joint, cr.level, c.contact.mu,
+                                               2 * np.pi * cr.peak_hz, harmonics=hs))
+        summary = write_report(ctx.out, c, summaries, speed)
+        ctx.print(f"[fe-joint] report: {ctx.path('report.md')}")
+    if ctx.comm is not None:
+        summary = ctx.comm.bcast(summary, root=0)
+    return {"written": ["report.md", "summary.json", "figures"]}
+
+
+REGISTRY["report"] = stage_report

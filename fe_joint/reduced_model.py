@@ -27,13 +27,15 @@ def check_damping_ratio(damping_ratio: float) -> float:
 
 
 def modal_damping_matrix(K: np.ndarray, M: np.ndarray, damping_ratio: float,
-                         rigid_tol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+                         rigid_tol: float = 1e-13) -> tuple[np.ndarray, np.ndarray]:
     """Viscous damping with the same ratio in every elastic mode: C = M Φ diag(2 ζ ω) Φᵀ M.
 
     Args:
         K, M: (n, n) reduced stiffness (N/mm) and mass (t).
         damping_ratio: modal damping ratio ζ in [0, 1).
-        rigid_tol: modes with ω² below rigid_tol * max(ω²) are rigid and get no damping.
+        rigid_tol: modes with |ω²| below rigid_tol * max(ω²) are rigid and get no damping (the
+            reduced model keeps boundary DOFs up to ~1e7 Hz, so round-off in the rigid eigenvalues
+            is ~1e-16 max(ω²); 1e-13 puts the threshold at a few Hz).
 
     Returns:
         (C (n, n) N·s/mm, frequencies (n,) Hz signed sqrt of the eigenvalues / 2π).

@@ -56,11 +56,10 @@ def dof_labels(layout, n_modes: int) -> list[str]:
     for side, idx in (("A", layout.pair_a), ("B", layout.pair_b)):
         for c, ax in enumerate("xyz"):
             lab[idx[:, c]] = [f"pair{p}.{side}.{ax}" for p in range(npair)]
-    for name, idx in layout.extra.items():
+    for name, idx in reversed(list(layout.extra.items())):  # shared node: 'excitation' wins
         for c, ax in enumerate("xyz"):
             lab[idx[c]] = f"{name}.{ax}"
     names = list(lab)
-    # a node that is both excitation and response keeps the excitation label
     return names + [f"mode{k}" for k in range(n_modes)]
 
 

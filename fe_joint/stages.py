@@ -47,6 +47,7 @@ class StageContext:
     comm: object
     summaries: dict = field(default_factory=dict)
     progress: bool = True
+    keys: dict = field(default_factory=dict)      # stage → cache key (for stage-internal caches)
 
     @property
     def rank(self) -> int:
@@ -118,7 +119,7 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
     keys = stage_keys(case)
     last = max(STAGES.index(s) for s in stages)
     needed = STAGES[: last + 1]
-    ctx = StageContext(case=case, out=out, comm=comm, progress=progress)
+    ctx = StageContext(case=case, out=out, comm=comm, progress=progress, keys=keys)
     for s in needed:
         man = read_manifest(out, s)
         cached = man is not None and man.get("key") == keys[s] and not (force and s in stages)
