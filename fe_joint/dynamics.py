@@ -106,6 +106,7 @@ def frf(rm, joint: JointModel, level: float, mu: float, f_lin: float, band: tupl
     w0, w1 = 2 * np.pi * f_lin * band[0], 2 * np.pi * f_lin * band[1]
     res = hb.frf(w0, w1, force, dof=rm.response_dof, max_points=max_points)
     k = int(np.argmax(res.amplitude))
+    peak_hz, peak_amp = _refine_peak(res.omega / (2 * np.pi), res.amplitude, k)
     er = hb.element_results(res.solutions[k])
     ne, nt = len(joint.area), er.T.shape[-1]
     status = np.full(ne, OPEN, dtype=np.int64)
@@ -124,9 +125,29 @@ def frf(rm, joint: JointModel, level: float, mu: float, f_lin: float, band: tupl
     return CurveResult(
         config=joint.name, level=float(level), omega_hz=res.omega / (2 * np.pi),
         amplitude=res.amplitude, stable=np.asarray(res.stable, bool),
-        peak_hz=float(res.omega[k] / (2 * np.pi)), peak_amplitude=float(res.amplitude[k]),
+        peak_hz=peak_hz, peak_amplitude=peak_amp,
         status=status, energy=energy, mean_normal=mean_normal, q_amp=q_amp,
         loop_u=(w[:, None] * elem_u).sum(axis=0), loop_T=elem_T.sum(axis=0),
         elem_u=elem_u, elem_T=elem_T, seconds=time.perf_counter() - t0,
         newton_iterations=int(res.newton_iterations), n_points=len(res.omega),
         n_active=len(act), n_nonlinear=int(np.sum(er.status > 0)))
+
+
+def _refine_peak(f: np.ndarray, a: np.ndarray, k: int) -> tuple[float, float]:
+    """Peak of the parabola through the largest point and its neighbours on the branch.
+
+    Continuation points are discrete; the parabola (exact for a smooth maximum to second order)
+    removes most of the sampling error of the peak frequency and amplitude.
+    """
+    if k == 0 or k == len(f) - 1:
+        return float(f[k]), float(a[k])
+    x, y = f[k - 1:k + 2], a[k - 1:k + 2]
+    if len(set(x.tolist())) < 3:
+        return float(f[k]), float(a[k])
+    c2, c1, c0 = np.polyfit(x - x[1], y, 2)
+    if c2 >= 0:
+        return float(f[k]), float(a[k])
+    dx = -c1 / (2 * c2)
+    if not (x[0] - x[1] <= dx <= x[2] - x[1]):
+        return float(f[k]), float(a[k])
+    return float(x[1] + dx), float(c0 + c1 * dx + c2 * dx * dx)

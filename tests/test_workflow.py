@@ -1,0 +1,136 @@
+"""Coarse end-to-end runs of the whole pipeline (issue 6): invariants of the study.
+
+One serial run of every stage on the quick preset (coarse mesh, 64² BEM grid, H = 1) is shared
+by the tests of this module; the MPI test reruns a lighter case on 1 rank (COMM_SELF on rank 0)
+and on 2 ranks and compares the summaries.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fe_joint.cli import main
+from fe_joint.config import load_case
+from fe_joint.stages import STAGES, read_stage_log, run_stages
+
+CASE = """
+name = "e2e"
+[roughness]
+rq_um = [1.0, 15.0]
+v_rq_um = 15.0
+[dynamics]
+max_points = 60
+"""
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("e2e")
+    case = d / "case.toml"
+    case.write_text(CASE)
+    out = d / "out"
+    # a run 'killed' after its first stage, then the full run: the mesh must not be rebuilt
+    assert main(["run", str(case), "--preset", "quick", "--out", str(out), "--stages", "mesh",
+                 "--no-progress"]) == 0
+    assert main(["run", str(case), "--preset", "quick", "--out", str(out), "--no-progress"]) == 0
+    return out
+
+
+def _summary(out: Path) -> dict:
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_finished_stages_not_recomputed(run: Path) -> None:
+    log = [(e["stage"], e["action"]) for e in read_stage_log(run)]
+    assert log[0] == ("mesh", "ran")
+    assert ("mesh", "cached") in log
+    assert [s for s, a in log if a == "ran"] == list(STAGES)   # each stage ran exactly once
+
+
+def test_zero_roughness_reproduces_fe_pressure(run: Path) -> None:
+    s = _summary(run)
+    assert s["coupling_rel_error"] <= 1e-6
+
+
+def test_element_loads_sum_to_bolt_force(run: Path) -> None:
+    from fe_joint.multiscale import load_surfaces
+    surfaces, _ = load_surfaces(run / "contact" / "surfaces.npz")
+    case = load_case(preset="quick")
+    for sc in surfaces.values():
+        assert sc.n0.sum() == pytest.approx(case.preload.bolt_force, rel=1e-9)
+        assert np.all(sc.gap_el[sc.n0 > 0] == 0)
+
+
+def test_contact_fraction_and_keq_fall_with_rq(run: Path) -> None:
+    s = _summary(run)
+    cf = s["contact_fraction"]
+    assert cf["1"] > cf["15"] > 0
+    keq = s["k_eq_vs_rq"]
+    assert keq["1"]["kn"] > keq["15"]["kn"] > 0
+    assert keq["1"]["kt"] > keq["15"]["kt"] > 0
+
+
+def test_resonance_falls_with_excitation(run: Path) -> None:
+    s = _summary(run)
+    peaks = [s["peaks"][f"baseline@L{i}"]["peak_hz"] for i in range(len(s["levels_N"]))]
+    assert all(a > b for a, b in zip(peaks, peaks[1:]))
+    # more slip, more friction dissipation per unit of response
+    e = [s["peaks"][f"baseline@L{i}"]["dissipated"] for i in range(len(s["levels_N"]))]
+    assert all(a < b for a, b in zip(e, e[1:]))
+
+
+def test_tiny_excitation_peak_is_stuck_linear_mode(run: Path) -> None:
+    s = _summary(run)
+    assert s["linear_peak_rel_error"] <= 1e-3
+
+
+def test_report_written(run: Path) -> None:
+    text = (run / "report.md").read_text()
+    for fig in ("frf_configurations", "frf_roughness", "pressure_morphology", "stiffness_maps",
+                "status_energy", "hysteresis_loops", "keq_contact_fraction"):
+        assert (run / "figures" / f"{fig}.png").stat().st_size > 1000
+        assert f"figures/{fig}.png" in text
+
+
+MPI_CASE = """
+name = "e2e-mpi"
+[roughness]
+rq_um = [1.0, 15.0]
+v_rq_um = 15.0
+[dynamics]
+max_points = 40
+configurations = ["baseline", "v3"]
+[contact]
+kt_max_passes = 1
+"""
+
+
+@pytest.mark.mpi
+def test_same_summary_on_one_and_two_ranks(tmp_path_factory) -> None:
+    from mpi4py import MPI
+
+    from fe_joint.pipeline import REGISTRY
+    comm = MPI.COMM_WORLD
+    if comm.size == 1:
+        pytest.skip("MPI-only comparison: needs mpirun -n 2 (scripts/test runs it)")
+    d = Path(comm.bcast(str(tmp_path_factory.mktemp("mpi")) if comm.rank == 0 else None, root=0))
+    import tomllib
+    from fe_joint.config import case_from_dict
+    case = case_from_dict(tomllib.loads(MPI_CASE), preset="quick")
+    if comm.rank == 0:   # the serial reference, on this rank alone
+        run_stages(case, d / "one", STAGES, REGISTRY, comm=MPI.COMM_SELF, progress=False)
+    comm.barrier()
+    run_stages(case, d / "all", STAGES, REGISTRY, comm=comm, progress=False)
+    if comm.rank == 0:
+        a, b = _summary(d / "one"), _summary(d / "all")
+        for key in a["peaks"]:
+            for q in ("peak_hz", "peak_amplitude"):
+                assert b["peaks"][key][q] == pytest.approx(a["peaks"][key][q], rel=1e-6), (key, q)
+        for rq, v in a["contact_fraction"].items():
+            assert b["contact_fraction"][rq] == pytest.approx(v, rel=1e-9)
+        for k, v in a["k_eq_vs_rq"].items():
+            assert b["k_eq_vs_rq"][k]["kn"] == pytest.approx(v["kn"], rel=1e-6)
+        assert b["levels_N"] == pytest.approx(a["levels_N"], rel=1e-6)
