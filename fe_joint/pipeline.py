@@ -74,7 +74,7 @@ def stage_contact(ctx: StageContext) -> dict:
     rm = _reduced_model(ctx)
     setup = ms.interface_setup(rm, c.geometry, c.material, r)
     # zero roughness must give back the smooth FE pressure (equivalent macro gap)
-    flat = ms.rough_contact(setup, 0.0, r.corr_length, r.seed, comm=ctx.comm, stiffness=False)
+    flat = ms.rough_contact(setup, 0.0, r.corr_length, r.seed, comm=ctx.comm, stiffness=False, tol=1e-12)
     coupling_err = float(np.abs(flat.pressure - setup.p_s).max() / setup.p_s.max())
     rqs = sorted(set(r.rq_um) | {r.v_rq_um})
     surfaces = {}
