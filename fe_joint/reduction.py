@@ -14,7 +14,7 @@ import resource
 import time
 
 import numpy as np
-import scipy.linalg as sla
+from petsc4py import PETSc
 
 from fe_joint.condensation import BoundaryCondensation
 from fe_joint.modal import free_modes, solve_eigenproblem, to_hz
@@ -26,11 +26,38 @@ def _peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def fixed_interface_modes(cond: BoundaryCondensation, cutoff_hz: float, nev0: int = 20,
+def count_modes_below(K, M, cutoff_hz: float) -> int:
+    """Number of eigenvalues of (K, M) below (2 pi cutoff_hz)² from the inertia of K - sigma M.
+
+    Sylvester's law of inertia: the negative pivots of an LDLᵀ factorization (MUMPS, ICNTL(13)=1 so
+    the root node is not handed to ScaLAPACK, which reports no inertia) count the eigenvalues
+    below the shift. One factorization instead of a guess-and-double eigen solve.
+    """
+    sigma = (2 * np.pi * cutoff_hz) ** 2
+    A = K.copy()
+    A.axpy(-sigma, M)
+    ksp = PETSc.KSP().create(K.getComm())
+    ksp.setOperators(A)
+    ksp.setType(PETSc.KSP.Type.PREONLY)
+    pc = ksp.getPC()
+    pc.setType(PETSc.PC.Type.CHOLESKY)
+    pc.setFactorSolverType("mumps")
+    pc.setFactorSetUpSolverType()
+    F = pc.getFactorMatrix()
+    F.setMumpsIcntl(13, 1)
+    F.setMumpsIcntl(24, 1)  # null-pivot detection: MatGetInertia needs it (nzero)
+    ksp.setUp()
+    nneg, _, _ = F.getInertia()
+    ksp.destroy()
+    A.destroy()
+    return int(nneg)
+
+
+def fixed_interface_modes(cond: BoundaryCondensation, cutoff_hz: float,
                           max_modes: int = 2000) -> tuple[np.ndarray, list]:
     """Fixed-interface modes of (K_II, M_II) with frequency <= cutoff_hz.
 
-    Requests ``nev0`` pairs and doubles until the highest converged one passes the cut-off.
+    The number of modes is counted first (:func:`count_modes_below`), then one SLEPc solve.
 
     Returns:
         (frequencies Hz ascending, list of M_II-normalized interior Vecs).
@@ -38,15 +65,15 @@ def fixed_interface_modes(cond: BoundaryCondensation, cutoff_hz: float, nev0: in
     if not (np.isfinite(cutoff_hz) and cutoff_hz > 0):
         raise ValueError(f"cutoff_hz must be a finite frequency > 0 Hz, got {cutoff_hz}")
     KII, MII = cond.interior_pair()
-    n_int = KII.getSize()[0]
-    nev = min(nev0, n_int)
-    while True:
-        vals, vecs = solve_eigenproblem(KII, MII, nev, sigma=0.0)
-        f = to_hz(vals)
-        if f[-1] > cutoff_hz or nev >= min(max_modes, n_int):
-            keep = f <= cutoff_hz
-            return f[keep], [v for v, k in zip(vecs, keep) if k]
-        nev = min(2 * nev, max_modes, n_int)
+    n = count_modes_below(KII, MII, cutoff_hz)
+    if n > max_modes:
+        raise ValueError(f"cutoff_hz = {cutoff_hz} keeps {n} fixed-interface modes (> {max_modes}); lower it")
+    if n == 0:
+        return np.zeros(0), []
+    vals, vecs = solve_eigenproblem(KII, MII, n, sigma=0.0)
+    f = to_hz(vals)
+    keep = f <= cutoff_hz
+    return f[keep], [v for v, k in zip(vecs, keep) if k]
 
 
 def dof_labels(layout, n_modes: int) -> list[str]:
