@@ -17,6 +17,9 @@ import numpy as np
 from .errors import ConvergenceError
 from . import stability as stab
 
+DEBUG = False
+DEBUG_STATE = []
+
 
 @dataclass
 class FRFResult:
@@ -82,53 +85,111 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
 
     sol = hb.solve(w0, force)
     U = hb._from_el(sol.contact)
-    us = max(np.linalg.norm(U), 1e-300) if np.linalg.norm(U) > 0 else 1.0
-    tol = hb.tol
+    # amplitude scale: geometric mean of the start response and the linear-base peak over the
+    # range, so that neither the far-from-resonance start nor a lightly damped linear peak
+    # dictates the arc length
+    lin_peak = max(np.linalg.norm(hb.ulin(w_, force)) for w_ in np.linspace(min(w0, w1), max(w0, w1), 64))
+    us = np.sqrt(max(np.linalg.norm(U), 1e-300) * max(lin_peak, 1e-300))
+    if not np.isfinite(us) or np.linalg.norm(U) == 0:
+        us = 1.0
     total_it = sol.iterations
+    shape = U.shape
 
-    def tangent(U, w, prev, ev=None):
-        R, g, nl, Dg = hb.residual(U, w, hb.ulin(w, force)) if ev is None else ev
-        (b,) = hb.linsolve(w, nl, Dg, [-hb.r_omega(w, force, g)])
-        t = np.concatenate([b.ravel() / us, [1.0 / ws]])
+    def Y_of(U, w):
+        return np.concatenate([U.ravel() / us, [w / ws]])
+
+    def evaluate(U, w):
+        Ul = hb.ulin(w, force)
+        R, g, nl, Dg = hb.residual(U, w, Ul)
+        return R, g, nl, Dg, max(np.linalg.norm(U), np.linalg.norm(Ul), 1e-300)
+
+    def tangent(U, w, ev, prev, ref_sign):
+        """Unit tangent oriented by the sign of the bordered determinant (robust at the corner
+        folds of the piecewise-linear contact laws, where the tangent can turn by > 90 deg)."""
+        R, g, nl, Dg, _ = ev
+        Rw = hb.r_omega(w, force, g)
+        [(dU, dw)], sign = hb.linsolve_aug(w, nl, Dg, Rw, prev[:-1].reshape(shape) / us,
+                                           prev[-1] / ws, [(np.zeros(shape), -1.0)])
+        t = np.concatenate([dU.ravel() / us, [dw / ws]])
         t /= np.linalg.norm(t)
-        if prev is None:
-            return t * direction
-        return t if t @ prev >= 0 else -t
+        if ref_sign is not None and sign != 0 and sign != ref_sign:
+            t = -t
+        return t, sign
 
+    def corrector(Yp, t, moore_penrose):
+        """Newton on {R = 0, t.(Y - Yp) = 0}; Moore-Penrose variant: t follows the local tangent."""
+        Uc, wc = Yp[:-1].reshape(shape) * us, Yp[-1] * ws
+        ev = evaluate(Uc, wc)
+        step = np.inf
+        tk = t.copy()
+        for it in range(1, max_corrector + 1):
+            R, g, nl, Dg, scale = ev
+            r = np.linalg.norm(R)
+            if it > 1 and hb.converged(r, scale, step):
+                return True, Uc, wc, ev, it
+            Rw = hb.r_omega(wc, force, g)
+            cval = 0.0 if moore_penrose else tk @ (Y_of(Uc, wc) - Yp)
+            rhs = [(R, cval)] + ([(np.zeros(shape), -1.0)] if moore_penrose else [])
+            sols_, _ = hb.linsolve_aug(wc, nl, Dg, Rw, tk[:-1].reshape(shape) / us, tk[-1] / ws, rhs)
+            dU, dw = sols_[0]
+            if moore_penrose:
+                tn = np.concatenate([sols_[1][0].ravel() / us, [sols_[1][1] / ws]])
+                tk = tn / np.linalg.norm(tn)
+            # damped step: halve while the residual does not decrease
+            alpha = 1.0
+            for _ in range(6):
+                Ut, wt = Uc + alpha * dU, wc + alpha * dw
+                if wt > 0:
+                    evt = evaluate(Ut, wt)
+                    if np.linalg.norm(evt[0]) <= (1 - 1e-4 * alpha) * r:
+                        break
+                alpha *= 0.5
+            if wt <= 0:
+                return False, Uc, wc, ev, it
+            step = max(np.linalg.norm(alpha * dU), abs(alpha * dw) / ws * scale)
+            Uc, wc, ev = Ut, wt, evt
+            if DEBUG:
+                print("corr", it, wc, np.linalg.norm(ev[0]) / ev[4], moore_penrose)
+                DEBUG_STATE.append((Uc.copy(), wc))
+        return False, Uc, wc, ev, max_corrector
+
+    ev0 = evaluate(U, w0)
+    t0_guess = np.zeros(U.size + 1)
+    t0_guess[-1] = direction
+    t, ref_sign = tangent(U, w0, ev0, t0_guess, None)
+    if t[-1] * direction < 0:
+        t = -t
+        ref_sign = -ref_sign
     keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
-    t = tangent(U, w0, None)
     sols, taus = [sol], [t[-1]]
     w = w0
     while len(sols) < max_points:
-        Y = np.concatenate([U.ravel() / us, [w / ws]])
+        Y = Y_of(U, w)
         while True:
             Yp = Y + ds * t
-            Uc, wc = Yp[:-1].reshape(U.shape) * us, Yp[-1] * ws
-            ok = False
-            for it in range(1, max_corrector + 1):
-                if wc <= 0:
-                    break
-                Ul = hb.ulin(wc, force)
-                R, g, nl, Dg = hb.residual(Uc, wc, Ul)
-                scale = max(np.linalg.norm(Uc), np.linalg.norm(Ul), 1e-300)
-                cval = t @ (np.concatenate([Uc.ravel() / us, [wc / ws]]) - Yp)
-                if np.linalg.norm(R) <= tol * scale and it > 1:
-                    ok = True
-                    break
-                a, b = hb.linsolve(wc, nl, Dg, [-R, -hb.r_omega(wc, force, g)])
-                tU, tw = t[:-1], t[-1]
-                dw = -(cval + tU @ a.ravel() / us) / (tU @ b.ravel() / us + tw / ws)
-                Uc = Uc + a + dw * b
-                wc = wc + dw
+            ok, Uc, wc, ev, it = corrector(Yp, t, False)
             total_it += it
             if ok:
                 break
+            # Corner fold of the piecewise-linear contact laws: the branch turns back exactly where
+            # a time sample switches state, so no point exists on the hyperplane ahead. Take the
+            # tangent of the piece beyond the corner (Jacobian at the predictor), orient it by the
+            # bordered-determinant sign, and restart from the corner point along it.
+            evp = evaluate(Yp[:-1].reshape(shape) * us, Yp[-1] * ws)
+            if ref_sign is not None:
+                tb, _ = tangent(Yp[:-1].reshape(shape) * us, Yp[-1] * ws, evp, t, ref_sign)
+                Yc = Y_of(Uc, wc)
+                ok, Uc, wc, ev, it = corrector(Yc + ds * tb, tb, False)
+                total_it += it
+                if ok and np.linalg.norm(Y_of(Uc, wc) - Y) > 1e-3 * ds:
+                    break
             ds *= 0.5
             if ds < ds_min:
                 raise ConvergenceError(f"continuation step fell below ds_min near omega = {w:.6g} rad/s",
-                                       float(np.linalg.norm(R) / scale))
+                                       float(np.linalg.norm(ev[0]) / ev[4]))
         U, w = Uc, wc
-        t = tangent(U, w, t, (R, g, nl, Dg))
+        t, sgn = tangent(U, w, ev, t, ref_sign)
+        R, g, nl, Dg, scale = ev
         sols.append(hb.make_solution(w, force, U, float(np.linalg.norm(R) / scale), it, nl.size,
                                      g=g, jac=(nl, Dg) if keep_jac else None))
         taus.append(t[-1])
@@ -139,8 +200,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         if (w - w1) * direction >= 0:
             # land exactly on omega_end from the last point
             try:
-                last = hb.solve(w1, force, guess=sols[-1])
-                sols[-1] = last
+                sols[-1] = hb.solve(w1, force, guess=sols[-1])
             except ConvergenceError:
                 pass
             break

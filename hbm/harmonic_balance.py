@@ -174,20 +174,25 @@ class HarmonicBalance:
         U[1], U[2] = u.real, -u.imag
         return U
 
-    def gapply(self, omega: float, g: np.ndarray) -> np.ndarray:
-        """Receptance times correction-force harmonics, (n_H, n_c) -> (n_H, n_c)."""
+    def gapply(self, omega: float, g: np.ndarray, transpose: bool = False) -> np.ndarray:
+        """Receptance times correction-force harmonics, (n_H, n_c) -> (n_H, n_c).
+
+        transpose=True applies the transpose of the real harmonic-block operator (G is complex
+        symmetric, so that is the block operator of conj(G))."""
         out = np.empty_like(g)
         out[0] = self.G.apply(0, omega, g[0].astype(complex)).real
-        if self.H:
-            cpl = (g[1::2] - 1j * g[2::2]).T                   # (nc, H)
-            Psi = self.G.Psi
-            PtC = Psi.T @ cpl                                  # (m, H)
-            mod = np.empty_like(PtC)
-            for h in range(1, self.H + 1):
-                L = self.G.modal(h, omega)
-                mod[:, h - 1] = L * PtC[:, h - 1] if L.ndim == 1 else L @ PtC[:, h - 1]
-            u = Psi @ mod + self.G.R @ cpl
-            out[1::2], out[2::2] = u.real.T, -u.imag.T
+        cpl = (g[1::2] - 1j * g[2::2]).T                       # (nc, H)
+        Psi = self.G.Psi
+        PtC = Psi.T @ cpl                                      # (m, H)
+        mod = np.empty_like(PtC)
+        for h in range(1, self.H + 1):
+            L = self.G.modal(h, omega)
+            if transpose:
+                L = L.conj()
+            mod[:, h - 1] = L * PtC[:, h - 1] if L.ndim == 1 else L @ PtC[:, h - 1]
+        u = Psi @ mod + self.G.R @ cpl
+        # transposed blocks [[a, -b], [b, a]] act as conj(G) = a - i b on c = x - i y
+        out[1::2], out[2::2] = u.real.T, -u.imag.T
         return out
 
     # ------------------------------------------------------------------ residual
@@ -238,107 +243,30 @@ class HarmonicBalance:
             G[b:b + p, b:b + p] = Gh.real
         return G
 
-    def linsolve(self, omega: float, nl: np.ndarray, Dg, rhs: list[np.ndarray]) -> list[np.ndarray]:
-        """Solve J x = rhs (each (n_H, n_c)) with J = I + G dg/dU, reduced on the nonlinear elements."""
-        self.stats["linear_solves"] += 1
-        k = nl.size
-        if k == 0:
-            return [r.copy() for r in rhs]
-        nH = self.nH
+    def _reduced(self, omega: float, nl: np.ndarray, Dg: np.ndarray):
+        """Reduced Newton operator on the nonlinear elements: (cn, idx, matvec, J or None, prec)."""
+        k, nH = nl.size, self.nH
         cn = (3 * nl[:, None] + np.arange(3)).ravel()
-        P = nH * cn.size
+        p = cn.size
+        P = nH * p
         idx = self._elidx(k)
-        B = np.stack([r[:, cn].ravel() for r in rhs], axis=1)   # (P, nrhs) reduced layout
         if P <= self.dense_limit:
             Gb = self._gbig(omega, cn)
             J = np.eye(P)
             J[:, idx] += np.einsum("pkx,kxy->pky", Gb[:, idx], Dg)
-            X = sla.lu_solve(sla.lu_factor(J, check_finite=False), B, check_finite=False)
-        else:
-            X = self._gmres(omega, nl, cn, idx, Dg, B)
-        out = []
-        for i, r in enumerate(rhs):
-            xe = X[:, i][idx]                                   # (k, 3 nH) element layout
-            ge = np.einsum("kxy,ky->kx", Dg, xe)
-            gfull = np.zeros((nH, self.nc))
-            gfull[:, cn] = self._from_el(ge.reshape(k, 3, nH))
-            out.append(r - self.gapply(omega, gfull))
-        return out
+            return cn, idx, (lambda x: J @ x), J, None
+        matvec, prec = self._gmres_ops(omega, nl, cn, idx, Dg)
+        return cn, idx, matvec, None, prec
 
-    # ------------------------------------------------------------------ GMRES path
-    def _gmres(self, omega, nl, cn, idx, Dg, B):
-        k, nH, p = nl.size, self.nH, cn.size
-        P = nH * p
-        Psi = self.G.Psi[cn]
-        R = self.G.R[np.ix_(cn, cn)]
-        G = self.G
+    def _expand(self, omega, nl, cn, idx, Dg, xN):
+        """G (dg/dU x_N) on all contact coordinates for a reduced vector x_N."""
+        k, nH = nl.size, self.nH
+        ge = np.einsum("kxy,ky->kx", Dg, xN[idx])
+        gfull = np.zeros((nH, self.nc))
+        gfull[:, cn] = self._from_el(ge.reshape(k, 3, nH))
+        return self.gapply(omega, gfull)
 
-        def gapply_red(v):                                    # v (nH, p) real
-            out = np.empty_like(v)
-            out[0] = (Psi @ (G.modal(0, omega) * (Psi.T @ v[0])).real
-                      if G.diag_damping else Psi @ (G.modal(0, omega) @ (Psi.T @ v[0])).real) + R @ v[0]
-            cpl = v[1::2] - 1j * v[2::2]
-            PtC = Psi.T @ cpl.T
-            for h in range(1, self.H + 1):
-                L = G.modal(h, omega)
-                PtC[:, h - 1] = L * PtC[:, h - 1] if L.ndim == 1 else L @ PtC[:, h - 1]
-            u = Psi @ PtC + R @ cpl.T
-            out[1::2], out[2::2] = u.real.T, -u.imag.T
-            return out
-
-        def matvec(x):
-            xe = x[idx]
-            ge = np.einsum("kxy,ky->kx", Dg, xe)
-            gv = np.empty(P)
-            gv[idx] = ge
-            return x + gapply_red(gv.reshape(nH, p)).ravel()
-
-        # harmonic-averaged element stiffness (3x3 per element) from the diagonal harmonic blocks
-        Dh = Dg.reshape(k, 3, nH, 3, nH)
-        hh = np.arange(1, nH)
-        kbar = Dh[:, :, hh, :, hh].mean(axis=0) if nH > 1 else Dh[:, :, 0, :, 0]
-        Kb = np.zeros((p, p))
-        blk = (3 * np.arange(k)[:, None] + np.arange(3)).ravel()
-        rr = blk.reshape(k, 3)
-        Kb[rr[:, :, None], rr[:, None, :]] = kbar
-        A = np.eye(p) + R @ Kb
-        lu = sla.lu_factor(A, check_finite=False)
-        AinvU = sla.lu_solve(lu, Psi, check_finite=False)      # (p, m)
-        VtAU = (Psi.T @ Kb) @ AinvU                            # (m, m)
-        VtK = Psi.T @ Kb
-        small = {}
-        for h in range(0, self.H + 1):
-            L = G.modal(h, omega)
-            Lm = np.diag(L) if L.ndim == 1 else L
-            if h == 0:
-                keep = ~G.rigid
-                Li = np.zeros_like(Lm)
-                # Woodbury in the elastic subspace only (rigid modes do not act at h = 0)
-                S = np.eye(Lm.shape[0], dtype=complex)
-                S[np.ix_(keep, keep)] = np.eye(keep.sum()) + Lm[np.ix_(keep, keep)] @ VtAU[np.ix_(keep, keep)]
-                small[h] = (S, Lm)
-            else:
-                small[h] = (np.eye(Lm.shape[0]) + Lm @ VtAU, Lm)
-        facs = {h: (sla.lu_factor(S, check_finite=False), Lm) for h, (S, Lm) in small.items()}
-
-        def prec(x):
-            v = x.reshape(nH, p)
-            out = np.empty_like(v)
-            y = sla.lu_solve(lu, v.T, check_finite=False)      # (p, nH): A^-1 on all harmonic rows
-            for h in range(self.H + 1):
-                f, Lm = facs[h]
-                if h == 0:
-                    yh = y[:, 0].astype(complex)
-                else:
-                    yh = y[:, 2 * h - 1] - 1j * y[:, 2 * h]
-                # (A + Psi L V^T)^-1 = A^-1 - A^-1 Psi (I + L V^T A^-1 Psi)^-1 L V^T A^-1
-                z = yh - AinvU @ sla.lu_solve(f, Lm @ (VtK @ yh), check_finite=False)
-                if h == 0:
-                    out[0] = z.real
-                else:
-                    out[2 * h - 1], out[2 * h] = z.real, -z.imag
-            return out.ravel()
-
+    def _krylov(self, matvec, prec, B, P):
         Aop = spla.LinearOperator((P, P), matvec=matvec)
         Mop = spla.LinearOperator((P, P), matvec=prec)
         X = np.empty_like(B)
@@ -347,19 +275,149 @@ class HarmonicBalance:
 
             def cb(_):
                 it[0] += 1
-            x, info = spla.gmres(Aop, B[:, i], M=Mop, tol=1e-10, atol=0.0, restart=200,
-                                 maxiter=5, callback=cb, callback_type="pr_norm")
+            x, info = spla.gmres(Aop, B[:, i], M=Mop, tol=1e-11, atol=0.0, restart=150,
+                                 maxiter=4, callback=cb, callback_type="pr_norm")
             self.stats["gmres_iterations"] += it[0]
             if info != 0:
                 res = np.linalg.norm(matvec(x) - B[:, i]) / max(np.linalg.norm(B[:, i]), 1e-300)
-                if not np.isfinite(res) or res > 1e-6:
+                if not np.isfinite(res) or res > 1e-7:
                     raise ConvergenceError("GMRES did not converge on the reduced Newton system", res)
             X[:, i] = x
         return X
 
+    def linsolve(self, omega: float, nl: np.ndarray, Dg, rhs: list[np.ndarray]) -> list[np.ndarray]:
+        """Solve J x = rhs (each (n_H, n_c)) with J = I + G dg/dU, reduced on the nonlinear elements."""
+        self.stats["linear_solves"] += 1
+        if nl.size == 0:
+            return [r.copy() for r in rhs]
+        cn, idx, matvec, J, prec = self._reduced(omega, nl, Dg)
+        B = np.stack([r[:, cn].ravel() for r in rhs], axis=1)   # (P, nrhs) reduced layout
+        if J is not None:
+            X = sla.lu_solve(sla.lu_factor(J, check_finite=False), B, check_finite=False)
+        else:
+            X = self._krylov(matvec, prec, B, B.shape[0])
+        return [r - self._expand(omega, nl, cn, idx, Dg, X[:, i]) for i, r in enumerate(rhs)]
+
+    def linsolve_aug(self, omega, nl, Dg, Rw, tU, tw, rhs):
+        """Bordered Newton solves of pseudo-arc-length continuation (nonsingular at folds).
+
+        Solves [[J, Rw], [tU^T, tw]] [dU; dw] = [-R; -c] for each (R, c) in ``rhs`` (tU, tw
+        already scaled), reduced on the nonlinear elements: with dU_R = -R_R - Rw_R dw - J_RN dU_N
+        the last row becomes (tU_N - J_RN^T tU_R) . dU_N + (tw - tU_R . Rw_R) dw = -c + tU_R . R_R.
+
+        Returns:
+            list of (dU (n_H, n_c), dw), and the sign of the bordered determinant (0 if unknown,
+            i.e. on the GMRES path).
+        """
+        self.stats["linear_solves"] += 1
+        if nl.size == 0:
+            den = tw - np.sum(tU * Rw)
+            out = []
+            for R, c in rhs:
+                dw = (-c + np.sum(tU * R)) / den
+                out.append((-R - Rw * dw, dw))
+            return out, int(np.sign(den))
+        cn, idx, matvec, J, prec = self._reduced(omega, nl, Dg)
+        tR = tU.copy()
+        tR[:, cn] = 0.0
+        y = self.gapply(omega, tR, transpose=True)[:, cn].ravel()
+        v = tU[:, cn].ravel().copy()
+        v[idx] -= np.einsum("kyx,ky->kx", Dg, y[idx])
+        beta = tw - np.sum(tR * Rw)
+        RwN = Rw[:, cn].ravel()
+        P = RwN.size
+        Bm = np.stack([np.concatenate([-R[:, cn].ravel(), [-c + np.sum(tR * R)]]) for R, c in rhs], axis=1)
+        if J is not None:
+            A = np.empty((P + 1, P + 1))
+            A[:P, :P], A[:P, P], A[P, :P], A[P, P] = J, RwN, v, beta
+            lu, piv = sla.lu_factor(A, check_finite=False)
+            Z = sla.lu_solve((lu, piv), Bm, check_finite=False)
+            sign = int(np.prod(np.sign(np.diag(lu)))) * (-1) ** int(np.sum(piv != np.arange(P + 1)))
+        else:
+            def mv(z):
+                return np.concatenate([matvec(z[:P]) + RwN * z[P], [v @ z[:P] + beta * z[P]]])
+
+            def pc(z):
+                return np.concatenate([prec(z[:P]), [z[P] / beta if beta != 0 else z[P]]])
+            Z = self._krylov(mv, pc, Bm, P + 1)
+            sign = 0
+        out = []
+        for i, (R, c) in enumerate(rhs):
+            xN, dw = Z[:P, i], Z[P, i]
+            out.append((-R - Rw * dw - self._expand(omega, nl, cn, idx, Dg, xN), dw))
+        return out, sign
+
+    # ------------------------------------------------------------------ GMRES operators
+    def _gmres_ops(self, omega, nl, cn, idx, Dg):
+        """Matrix-free reduced Jacobian and its harmonic-averaged preconditioner (module docstring)."""
+        k, nH, p = nl.size, self.nH, cn.size
+        P = nH * p
+        Psi = self.G.Psi[cn]
+        R = self.G.R[np.ix_(cn, cn)]
+        G = self.G
+        Ls = [G.modal(h, omega) for h in range(self.H + 1)]
+
+        def gapply_red(v):                                    # v (nH, p) real
+            out = np.empty_like(v)
+            L0 = Ls[0]
+            out[0] = (Psi @ ((L0 * (Psi.T @ v[0])) if L0.ndim == 1 else L0 @ (Psi.T @ v[0]))).real + R @ v[0]
+            cpl = v[1::2] - 1j * v[2::2]
+            PtC = Psi.T @ cpl.T
+            for h in range(1, self.H + 1):
+                L = Ls[h]
+                PtC[:, h - 1] = L * PtC[:, h - 1] if L.ndim == 1 else L @ PtC[:, h - 1]
+            u = Psi @ PtC + R @ cpl.T
+            out[1::2], out[2::2] = u.real.T, -u.imag.T
+            return out
+
+        def matvec(x):
+            ge = np.einsum("kxy,ky->kx", Dg, x[idx])
+            gv = np.empty(P)
+            gv[idx] = ge
+            return x + gapply_red(gv.reshape(nH, p)).ravel()
+
+        # harmonic-averaged element stiffness (3x3 per element) from the diagonal harmonic blocks
+        Dh = Dg.reshape(k, 3, nH, 3, nH)
+        hh = np.arange(1, nH)
+        kbar = Dh[:, :, hh, :, hh].mean(axis=0)                # (k, 3, 3)
+        Kb = np.zeros((p, p))
+        rr = (3 * np.arange(k)[:, None] + np.arange(3))
+        Kb[rr[:, :, None], rr[:, None, :]] = kbar
+        A = np.eye(p) + R @ Kb
+        lu = sla.lu_factor(A, check_finite=False)
+        AinvU = sla.lu_solve(lu, Psi, check_finite=False)      # (p, m)
+        VtK = Psi.T @ Kb
+        VtAU = VtK @ AinvU                                     # (m, m)
+        facs = []
+        for h in range(self.H + 1):
+            Lm = np.diag(Ls[h]) if Ls[h].ndim == 1 else Ls[h]
+            facs.append((sla.lu_factor(np.eye(Lm.shape[0]) + Lm @ VtAU, check_finite=False), Lm))
+
+        def prec(x):
+            v = x.reshape(nH, p)
+            out = np.empty_like(v)
+            y = sla.lu_solve(lu, v.T, check_finite=False)      # (p, nH): A^-1 on all harmonic rows
+            for h in range(self.H + 1):
+                f, Lm = facs[h]
+                yh = y[:, 0].astype(complex) if h == 0 else y[:, 2 * h - 1] - 1j * y[:, 2 * h]
+                # (A + Psi L V^T)^-1 = A^-1 - A^-1 Psi (I + L V^T A^-1 Psi)^-1 L V^T A^-1
+                z = yh - AinvU @ sla.lu_solve(f, Lm @ (VtK @ yh), check_finite=False)
+                if h == 0:
+                    out[0] = z.real
+                else:
+                    out[2 * h - 1], out[2 * h] = z.real, -z.imag
+            return out.ravel()
+
+        return matvec, prec
+
     # ------------------------------------------------------------------ Newton
     def _scale(self, U, Ul):
         return max(np.linalg.norm(U), np.linalg.norm(Ul), 1e-300)
+
+    def converged(self, r: float, scale: float, step: float) -> bool:
+        """Convergence test: ||R|| <= tol * scale, or (at a kink of the nonsmooth contact law,
+        where Newton can stagnate) ||R|| <= 10 tol * scale with a last step below 10 tol * scale."""
+        return r <= self.tol * scale or (r <= 10 * self.tol * scale and step <= 10 * self.tol * scale)
 
     def newton(self, omega: float, force: np.ndarray, U0: np.ndarray):
         """Damped Newton at fixed omega from U0; returns (U, residual, iterations)."""
@@ -367,8 +425,9 @@ class HarmonicBalance:
         U = U0.copy()
         R, g, nl, Dg = self.residual(U, omega, Ul)
         r = np.linalg.norm(R)
+        step = np.inf
         for it in range(1, self.max_iter + 1):
-            if r <= self.tol * self._scale(U, Ul):
+            if self.converged(r, self._scale(U, Ul), step):
                 self._last = (g, (nl, Dg))
                 return U, r / self._scale(U, Ul), it - 1, nl.size
             (dU,) = self.linsolve(omega, nl, Dg, [-R])
@@ -380,8 +439,9 @@ class HarmonicBalance:
                 if rt <= (1 - 1e-4 * alpha) * r:
                     break
                 alpha *= 0.5
+            step = alpha * np.linalg.norm(dU)
             U, R, g, nl, Dg, r = Ut, Rt, gt, nlt, Dgt, rt
-        if r <= self.tol * self._scale(U, Ul):
+        if self.converged(r, self._scale(U, Ul), step):
             self._last = (g, (nl, Dg))
             return U, r / self._scale(U, Ul), self.max_iter, nl.size
         raise ConvergenceError(f"Newton did not converge at omega = {omega:.6g} rad/s in "
