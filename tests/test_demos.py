@@ -38,3 +38,11 @@ def test_demo_rough_contact_surface_has_requested_rq() -> None:
     assert rq == pytest.approx(5.0, rel=1e-9)
     frac = float(re.search(r"real contact area ([0-9.]+) %", out).group(1))
     assert 0.0 < frac < 100.0
+
+
+def test_demo_friction_hbm_matches_describing_function() -> None:
+    err, out = _result("demo_friction_hbm.py")
+    assert err <= 1e-4
+    # the exact integration is matched better with more harmonics
+    errs = [float(x) for x in re.findall(r"error vs exact ([0-9.e+-]+)", out)]
+    assert len(errs) == 3 and errs[2] < errs[0]
