@@ -1,0 +1,185 @@
+"""Limits, rigid-body handling, energy balance, Krylov path and input validation."""
+import numpy as np
+import pytest
+
+from hbm import ConvergenceError, FrictionContacts, HarmonicBalance, LinearStructure
+from hbm.structure import Receptance
+from hbm.harmonic_balance import _contact_operator
+
+
+def free_free_pair(n_extra=0):
+    """Two 3-DOF masses (x, y, z) joined by springs: free-free (3 rigid translations)."""
+    m1, m2, k = 2.0, 1.0, 50.0
+    M = np.diag([m1] * 3 + [m2] * 3)
+    K = np.zeros((6, 6))
+    for d in range(3):
+        K[np.ix_([d, d + 3], [d, d + 3])] += k * np.array([[1, -1], [-1, 1]])
+    C = 0.004 * K + 0.01 * M
+    return M, K, C
+
+
+def linear_response(M, K, C, F, w):
+    return np.linalg.solve(K - w**2 * M + 1j * w * C, F)
+
+
+def contact(mu, n0=5.0):
+    return FrictionContacts(np.array([[[0, 1, 2], [3, 4, 5]]]), kt=40.0, kn=100.0, mu=mu, n0=n0)
+
+
+F = np.array([1.0, 0.3, 0.0, 0.0, 0.0, 0.0])
+
+
+def stuck_stiffness(K):
+    Ks = K.copy()
+    for d, kk in enumerate([40.0, 40.0, 100.0]):
+        Ks[np.ix_([d, d + 3], [d, d + 3])] += kk * np.array([[1, -1], [-1, 1]])
+    return Ks
+
+
+@pytest.mark.parametrize("w", [2.0, 6.0, 13.0])
+def test_mu_large_gives_linear_stuck_frf(w):
+    M, K, C = free_free_pair()
+    hb = HarmonicBalance(LinearStructure(M, K, C), contact(1e6), harmonics=3)
+    sol = hb.solve(w, F)
+    q = linear_response(M, stuck_stiffness(K), C, F, w)
+    z = sol.coefficients[1] - 1j * sol.coefficients[2]
+    assert np.abs(z - q).max() <= 1e-9 * np.abs(q).max()
+    assert np.abs(sol.coefficients[[0, 3, 4, 5, 6]]).max() <= 1e-12 * np.abs(q).max()
+
+
+@pytest.mark.parametrize("w", [2.0, 9.0])
+def test_mu_zero_gives_frf_without_tangential_springs(w):
+    M, K, C = free_free_pair()
+    hb = HarmonicBalance(LinearStructure(M, K, C), contact(0.0), harmonics=3)
+    sol = hb.solve(w, F)
+    Kn = K.copy()
+    Kn[np.ix_([2, 5], [2, 5])] += 100.0 * np.array([[1, -1], [-1, 1]])   # normal spring stays
+    q = linear_response(M, Kn, C, F, w)
+    z = sol.coefficients[1] - 1j * sol.coefficients[2]
+    assert np.abs(z - q).max() <= 1e-8 * np.abs(q).max()
+
+
+def test_zero_force_zero_response():
+    M, K, C = free_free_pair()
+    hb = HarmonicBalance(LinearStructure(M, K, C), contact(0.3), harmonics=3)
+    sol = hb.solve(7.0, np.zeros(6))
+    assert np.all(sol.coefficients == 0.0)
+    assert np.all(hb.element_results(sol).energy == 0.0)
+
+
+def test_energy_balance_closes():
+    M, K, C = free_free_pair()
+    hb = HarmonicBalance(LinearStructure(M, K, C), contact(0.2), harmonics=3, samples=128)
+    w = 8.0
+    sol = hb.solve(w, 5.0 * F)
+    er = hb.element_results(sol)
+    assert er.status[0] in (1, 2) and er.energy[0] > 0
+    X = sol.coefficients
+    W_in = np.pi * (5.0 * F) @ X[2]
+    W_visc = sum(np.pi * h**2 * w * (X[2 * h - 1] @ C @ X[2 * h - 1] + X[2 * h] @ C @ X[2 * h])
+                 for h in range(1, 4))
+    W_fric = er.energy.sum()
+    assert W_fric > 0.05 * W_in
+    assert abs(W_in - W_visc - W_fric) <= 1e-6 * W_in
+
+
+def chain(n, free=True):
+    """n masses in a chain of springs (free-free if free), x DOFs only."""
+    M = np.diag(np.linspace(1.0, 2.0, n))
+    K = np.zeros((n, n))
+    for i in range(n - 1):
+        K[np.ix_([i, i + 1], [i, i + 1])] += (100.0 + 10 * i) * np.array([[1, -1], [-1, 1]])
+    if not free:
+        K[0, 0] += 100.0
+    return M, K
+
+
+def test_receptance_residual_flexibility_and_rigid_modes():
+    n = 12
+    M, K = chain(n)
+    C = 0.002 * K
+    dofs = np.array([[[3, -1, -1], [7, -1, -1]], [[5, -1, -1], [-1, -1, -1]]])
+    B = _contact_operator(dofs, n)
+    k0 = np.array([30.0, 0, 0, 0, 0, 0])
+    Bd = B.toarray()
+    Kb = K + Bd.T @ np.diag(k0) @ Bd
+    s_full = LinearStructure(M, K, C, n_modes=n)
+    s_trunc = LinearStructure(M, K, C, n_modes=4)
+    errs = []
+    for w in (0.3, 2.0):
+        Gd = Bd @ np.linalg.solve(Kb - w**2 * M + 1j * w * C, Bd.T)
+        Gf = Receptance(s_full, B, k0).matrix(1, w)
+        assert np.abs(Gf - Gd).max() <= 1e-9 * np.abs(Gd).max()
+        # truncated (4 of 12 modes) + static residual flexibility: exact as w -> 0, error growing
+        # like (w / w_cut)^2 below the first discarded mode
+        Gt = Receptance(s_trunc, B, k0).matrix(1, w)
+        errs.append(np.abs(Gt - Gd).max() / np.abs(Gd).max())
+    assert errs[0] <= 1e-4 and errs[1] <= 1e-2
+    assert errs[0] < errs[1] / 20
+    # static (h = 0) flexibility without the rigid-body mode: for the self-equilibrated pair load
+    # (+1 on DOF 3, -1 on DOF 7) the relative displacement follows from the pseudo-inverse
+    f = np.zeros(n)
+    f[3], f[7] = 1.0, -1.0
+    u_pinv = Bd[0] @ np.linalg.pinv(Kb) @ f
+    for s_ in (s_full, s_trunc):
+        G0 = Receptance(s_, B, k0).matrix(0, 1.0)
+        assert abs(G0[0, 0].real - u_pinv) <= 1e-9 * abs(u_pinv)
+
+
+def test_krylov_path_matches_direct():
+    n = 30
+    M, K = chain(n, free=True)
+    rng = np.random.default_rng(0)
+    ne = 12
+    a = rng.choice(n, size=ne, replace=False)
+    b = (a + 7) % n
+    dofs = np.full((ne, 2, 3), -1)
+    dofs[:, 0, 0], dofs[:, 1, 0] = a, b
+    c = FrictionContacts(dofs, kt=50.0, kn=100.0, mu=0.3, n0=rng.uniform(0.2, 2.0, ne))
+    s = LinearStructure(M, K, damping_ratio=0.01, n_modes=10)
+    f = np.zeros(n)
+    f[0] = 3.0
+    direct = HarmonicBalance(s, c, harmonics=3, samples=64)
+    krylov = HarmonicBalance(s, c, harmonics=3, samples=64, dense_limit=0)
+    w = 2.0
+    s1 = direct.solve(w, f)
+    s2 = krylov.solve(w, f)
+    assert s1.n_nonlinear >= 3
+    assert krylov.stats["gmres_iterations"] > 0
+    assert np.abs(s1.coefficients - s2.coefficients).max() <= 1e-7 * np.abs(s1.coefficients).max()
+
+
+def test_newton_failure_raises_with_residual():
+    M, K, C = free_free_pair()
+    hb = HarmonicBalance(LinearStructure(M, K, C), contact(0.2), harmonics=3, max_iter=1)
+    with pytest.raises(ConvergenceError) as e:
+        hb.solve(8.0, 5.0 * F)
+    assert e.value.residual > 0
+
+
+@pytest.mark.parametrize("kw, msg", [
+    (dict(kt=-1.0), "kt"), (dict(mu=-0.1), "mu"), (dict(n0=np.nan), "n0"),
+    (dict(kn=np.ones(3)), "kn"), (dict(dofs=np.zeros((2, 3))), "dofs"),
+])
+def test_contact_validation(kw, msg):
+    args = dict(dofs=np.array([[[0, 1, 2], [3, 4, 5]]]), kt=1.0, kn=1.0, mu=0.1, n0=1.0)
+    args.update(kw)
+    with pytest.raises(ValueError, match=msg):
+        FrictionContacts(**args)
+
+
+def test_structure_and_solver_validation():
+    M, K, C = free_free_pair()
+    with pytest.raises(ValueError, match="M"):
+        LinearStructure(M * np.nan, K)
+    with pytest.raises(ValueError, match="K"):
+        LinearStructure(M, K[:3, :3])
+    with pytest.raises(ValueError, match="damping_ratio"):
+        LinearStructure(M, K, damping_ratio=-0.1)
+    hb = HarmonicBalance(LinearStructure(M, K, C), contact(0.2))
+    with pytest.raises(ValueError, match="omega"):
+        hb.solve(-1.0, F)
+    with pytest.raises(ValueError, match="force"):
+        hb.solve(1.0, F[:3])
+    with pytest.raises(ValueError, match="dofs"):
+        HarmonicBalance(LinearStructure(M[:4, :4], K[:4, :4]), contact(0.2))
