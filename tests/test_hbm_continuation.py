@@ -1,0 +1,44 @@
+"""Continuation: fold passing with Hill stability; FRF vs the closed form along a whole curve."""
+import numpy as np
+
+from hbm import FrictionContacts, HarmonicBalance, LinearStructure
+from hbm.reference import jenkins_frf_h1
+
+
+def test_softening_fold_passed_and_unstable_branch_marked():
+    # preloaded normal contact that opens: stiffness 1 + 3 when closed, 1 when open -> softening
+    s = LinearStructure([[1.0]], [[1.0]], [[0.1]])
+    c = FrictionContacts(np.array([[[-1, -1, 0], [-1, -1, -1]]]), kt=1.0, kn=3.0, mu=0.5, n0=0.1)
+    hb = HarmonicBalance(s, c, harmonics=5, samples=128)
+    frf = hb.frf(0.6, 2.6, np.array([0.1]), dof=0, ds_max=0.1)
+    assert frf.method == "hill"
+    assert abs(frf.omega[-1] - 2.6) <= 1e-12 and frf.omega[0] == 0.6
+    tp = frf.turning_points
+    assert len(tp) >= 2
+    # three coexisting solutions between the folds: the branch goes back in frequency
+    assert frf.omega[tp[0]] > frf.omega[tp[-1]] + 0.005
+    # Hill: the branch between the first two folds is unstable, the ends are stable
+    mid = slice(tp[0] + 1, tp[1] - 1)
+    assert np.all(~frf.stable[mid]) and frf.stable[mid].size >= 5
+    assert frf.stable[-10:].all() and frf.stable[:5].all()
+    # every point on the curve is a converged solution: re-solving at fixed omega from it
+    # keeps it (same branch, residual below tolerance)
+    k = (tp[0] + tp[1]) // 2
+    again = hb.solve(frf.omega[k], np.array([0.1]), guess=frf.solutions[k])
+    assert abs(again.amplitude(0) - frf.amplitude[k]) <= 1e-7 * frf.amplitude[k]
+    # the contact opens part of the cycle on the upper branch
+    assert hb.element_results(frf.solutions[np.argmax(frf.amplitude)]).status[0] == 3
+
+
+def test_frf_curve_matches_closed_form_h1():
+    m, k, cc, kt, fs, F = 1.0, 1.0, 0.02, 1.0, 0.1, 0.1
+    s = LinearStructure([[m]], [[k]], [[cc]])
+    c = FrictionContacts(np.array([[[0, -1, -1], [-1, -1, -1]]]), kt=kt, kn=1.0, mu=fs, n0=1.0)
+    hb = HarmonicBalance(s, c, harmonics=1, samples=2048)
+    frf = hb.frf(0.7, 1.8, np.array([F]), dof=0, ds_max=0.3)
+    assert len(frf.omega) >= 20 and frf.stable.all() and not frf.turning_points
+    ref = np.array([jenkins_frf_h1(w, m, k, cc, kt, fs, F)[0] for w in frf.omega])
+    assert np.max(np.abs(frf.amplitude - ref) / ref) <= 3e-5
+    # the peak is found between the slipping (1) and stuck (sqrt 2) resonances
+    wpk = frf.omega[np.argmax(frf.amplitude)]
+    assert 1.0 < wpk < np.sqrt(2.0)
