@@ -207,6 +207,12 @@ class ElasticHalfSpace:
         # a real kernel spectrum keeps the products cheaper for the symmetric normal kernel
         self._zz = np.ascontiguousarray(self._zz.real) if np.allclose(self._zz.imag, 0.0) else self._zz
 
+    @property
+    def tangential_lipschitz(self) -> float:
+        """Largest eigenvalue (mm/MPa) of the tangential operator (bound from its symbol)."""
+        xx, yy, xy = self._xx.real, self._yy.real, self._xy.real
+        return float(np.max(0.5 * (xx + yy) + np.sqrt(0.25 * (xx - yy) ** 2 + xy ** 2)))
+
     def _plan(self, batch: tuple[int, ...]) -> _FFT2:
         shape = tuple(batch) + self.padded_shape
         plan = self._plans.get(shape)

@@ -390,9 +390,12 @@ def _patch_tangential(hs, p, W, mu, q_amplitudes, tangential_tol, secant, max_ra
     if secant:
         R = mu * p
         zero = np.zeros((z.shape[0], 2) + z.shape[1:])
-        r1 = pk_tangential_compacting(hs._apply_tangential, R, zero, zero, Qc, A, tol=tangential_tol)
+        L = hs.tangential_lipschitz
+        r1 = pk_tangential_compacting(hs._apply_tangential, R, zero, zero, Qc, A, tol=tangential_tol,
+                                      lipschitz=L)
         s1 = r1["shift"][:, :, None, None] - r1["displacement"]
-        r2 = pk_tangential_compacting(hs._apply_tangential, R, s1, r1["traction"], -Qc, A, tol=tangential_tol)
+        r2 = pk_tangential_compacting(hs._apply_tangential, R, s1, r1["traction"], -Qc, A, tol=tangential_tol,
+                                      lipschitz=L)
         dd = ((r1["shift"] - r2["shift"]) * e).sum(axis=1)
         qc = np.hypot(Qc[:, 0], Qc[:, 1])
         ok = (qc > 0) & (dd > 0)

@@ -90,6 +90,7 @@ def _force_correct(q, R, S, loaded, Q, A, n_pass: int = 3):
     return q
 
 
+@np.errstate(over="ignore", invalid="ignore")  # diverging entries are caught and restarted
 def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndarray, Q: np.ndarray,
                         cell_area: float, *, tol: float = 1e-8, max_iter: int = 2000,
                         raise_on_fail: bool = True, omega: np.ndarray | None = None) -> dict:
@@ -167,7 +168,7 @@ def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndar
         best_err = np.where(improved, err, best_err)
         best_q = np.where(improved[:, None, None, None], q, best_q)
         stall = np.where(improved, 0, stall + 1)
-        diverged = active & ((err > 100.0 * best_err) | (stall > 40)) & (omega > 1e-4)
+        diverged = active & ((err > 100.0 * best_err) | (stall > 40) | ~np.isfinite(err)) & (omega > 1e-4)
         stall = np.where(diverged, 0, stall)
         if diverged.any():
             omega = np.where(diverged, 0.5 * omega, omega)
@@ -212,24 +213,166 @@ def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndar
             "iterations": iters, "residual": err, "converged": ~active, "omega": omega}
 
 
-def pk_tangential_compacting(apply_kt, R, s_prev, q0, Q, cell_area, *, tol: float = 1e-6,
-                             max_iter: int = 3000, chunk: int = 40) -> dict:
-    """``pk_tangential_batch`` that drops converged entries every ``chunk`` iterations.
+def _kkt_error(q, u, s_prev, R, Rw, Q, A, fscale):
+    """KKT error (B,), shift δ (B, 2) and stick mask of an iterate (see module docstring)."""
+    g = u + s_prev
+    qn = np.sqrt(q[:, 0] ** 2 + q[:, 1] ** 2)
+    S = (R > 0) & (qn < R * (1 - 1e-10))
+    SL = (R > 0) & ~S
+    nS = S.sum(axis=_AX)
+    gbar = np.where(S[:, None], g, 0.0).sum(axis=_AX) / np.maximum(nS, 1)[:, None]
+    gall = (R[:, None] * g).sum(axis=_AX) / Rw[:, None]
+    delta = np.where((nS > 0)[:, None], gbar, gall)
+    g = g - delta[:, :, None, None]
+    qhat = q / np.where(qn > 0, qn, 1.0)[:, None]
+    gq = (g * qhat).sum(axis=1)
+    gt = g[:, 1] * qhat[:, 0] - g[:, 0] * qhat[:, 1]
+    gabs = np.sqrt(gq * gq + gt * gt)
+    res = np.where(S, gabs, np.where(SL, np.where(gq <= 0, np.abs(gt), gabs), 0.0))
+    scale = np.maximum(np.maximum(np.abs(delta).max(axis=1), np.abs(u).max(axis=(1, 2, 3))), 1e-300)
+    e1 = (R * res).sum(axis=_AX) / (Rw * scale)
+    e3 = np.sqrt(((A * q.sum(axis=_AX) - Q) ** 2).sum(axis=1)) / fscale
+    return np.maximum(e1, e3), delta, S
 
-    A batch of patches converges very unevenly (here: median 9, max ~200 iterations); restarting the
-    unconverged rest (warm-started from its current traction) on a smaller batch makes the FFTs of
-    the slow tail cheap. Same arguments and result keys as ``pk_tangential_batch``.
+
+def _project_force(y, R, Q, A, lam, ftol: float = 1e-11):
+    """Project y (B, 2, nx, ny) on {|q_i| ≤ R_i} ∩ {A Σ q = Q}: q = proj_disks(y − λ), λ (B, 2) by
+    safeguarded Newton on the 2-vector force equation (monotone), warm-started from ``lam``."""
+    loaded = R > 0
+    fs = np.maximum(R.sum(axis=_AX) * A, 1e-300)
+    lam = lam.copy()
+
+    def F(l, sel):
+        q = _project(np.where(loaded[sel, None], y[sel] - l[:, :, None, None], 0.0), R[sel])
+        return q, A * q.sum(axis=_AX) - Q[sel]
+
+    q, f = F(lam, slice(None))
+    fn = np.sqrt((f * f).sum(axis=1)) / fs
+    for _ in range(50):
+        open_ = np.nonzero(fn >= ftol)[0]
+        if open_.size == 0:
+            break
+        v = y[open_] - lam[open_, :, None, None]
+        Ro, lo = R[open_], loaded[open_]
+        vn = np.sqrt(v[:, 0] ** 2 + v[:, 1] ** 2)
+        inside = lo & (vn <= Ro)
+        bnd = lo & ~inside
+        inv = np.where(bnd, 1.0 / np.where(vn > 0, vn, 1.0), 0.0)
+        r = Ro * inv
+        nx_, ny_ = v[:, 0] * inv, v[:, 1] * inv
+        # dF/dλ = −A Σ D_i, D = I inside, (R/|v|)(I − n nᵀ) on the boundary
+        n_in = inside.sum(axis=_AX)
+        j00 = n_in + (r * (1 - nx_ * nx_)).sum(axis=_AX)
+        j11 = n_in + (r * (1 - ny_ * ny_)).sum(axis=_AX)
+        j01 = -(r * nx_ * ny_).sum(axis=_AX)
+        det = j00 * j11 - j01 * j01
+        ok = det > 1e-14 * np.maximum(j00 + j11, 1e-300) ** 2
+        d = np.where(ok, det, 1.0)
+        fo = f[open_]
+        step = np.stack([(j11 * fo[:, 0] - j01 * fo[:, 1]) / d, (j00 * fo[:, 1] - j01 * fo[:, 0]) / d], axis=1) / A
+        # singular Jacobian (every cell on its disk, aligned): move along F scaled by the cell count
+        step = np.where(ok[:, None], step, fo / (A * np.maximum(lo.sum(axis=_AX), 1))[:, None])
+        t = np.ones(open_.size)
+        todo = np.ones(open_.size, dtype=bool)
+        for _ in range(20):  # backtracking on |F|, only for the entries still failing
+            sel = open_[todo]
+            lt = lam[sel] + t[todo, None] * step[todo]
+            qt, ft = F(lt, sel)
+            fnt = np.sqrt((ft * ft).sum(axis=1)) / fs[sel]
+            good = fnt < fn[sel] * (1 - 1e-4 * t[todo]) + 1e-300
+            gi = np.nonzero(todo)[0][good]
+            lam[open_[gi]] = lt[good]
+            q[open_[gi]] = qt[good]
+            f[open_[gi]] = ft[good]
+            fn[open_[gi]] = fnt[good]
+            todo[gi] = False
+            if not todo.any():
+                break
+            t = np.where(todo, 0.5 * t, t)
+        if todo.any():  # no decrease at all: at round-off level, stop these entries
+            fn[open_[todo]] = 0.0
+    return q, lam
+
+
+def fista_tangential_batch(apply_kt, lipschitz: float, R, s_prev, q0, Q, cell_area, *, tol: float = 1e-6,
+                           max_iter: int = 5000, raise_on_fail: bool = True, check_every: int = 5) -> dict:
+    """Accelerated projected gradient (FISTA with adaptive restart) for the same increment problem.
+
+    Slower than the CG on regular problems but convergent for every convex instance: used as the
+    fallback for entries the CG does not finish (e.g. almost all cells slipping just below μP with a
+    2D slip-direction field). Step 1/L with L the largest eigenvalue of the tangential operator.
+    """
+    B = R.shape[0]
+    A = cell_area
+    Rw = R.sum(axis=_AX)
+    Rw = np.where(Rw > 0, Rw, 1.0)
+    fscale = np.where(R.sum(axis=_AX) > 0, R.sum(axis=_AX) * A, 1.0)
+    lam = np.zeros((B, 2))
+    x, lam = _project_force(q0, R, Q, A, lam)
+    y = x.copy()
+    t = np.ones(B)
+    active = np.ones(B, dtype=bool)
+    err = np.full(B, np.inf)
+    iters = np.zeros(B, dtype=int)
+    step = 1.0 / lipschitz
+    for it in range(max_iter + 1):
+        if it % check_every == 0 or it == max_iter:
+            ux = apply_kt(x)
+            e, delta, S = _kkt_error(x, ux, s_prev, R, Rw, Q, A, fscale)
+            err = np.where(active, e, err)
+            active &= ~(err < tol)
+            if not active.any() or it == max_iter:
+                break
+        iters += active
+        grad = apply_kt(y) + s_prev
+        x_new, lam = _project_force(y - step * grad, R, Q, A, lam)
+        t_new = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * t * t))
+        dx = x_new - x
+        restart = ((y - x_new) * dx).sum(axis=(1, 2, 3)) > 0
+        mom = np.where(restart, 0.0, (t - 1.0) / t_new)
+        y_new = x_new + mom[:, None, None, None] * dx
+        t = np.where(restart, 1.0, t_new)
+        a4 = active[:, None, None, None]
+        x = np.where(a4, x_new, x)
+        y = np.where(a4, y_new, y)
+    if active.any() and raise_on_fail:
+        raise ConvergenceError(
+            f"solve_tangential: {int(active.sum())} of {B} problems not converged to tol={tol:g}",
+            float(np.max(err[active])), int(iters.max()))
+    ux = apply_kt(x)
+    e, delta, S = _kkt_error(x, ux, s_prev, R, Rw, Q, A, fscale)
+    return {"traction": x, "displacement": ux, "shift": delta, "stick": S, "iterations": iters,
+            "residual": e, "converged": ~active, "omega": np.ones(B)}
+
+
+def pk_tangential_compacting(apply_kt, R, s_prev, q0, Q, cell_area, *, tol: float = 1e-6,
+                             max_iter: int = 3000, chunk: int = 40, lipschitz: float | None = None,
+                             cg_iter: int = 40) -> dict:
+    """Batched increment solve: CG rounds that drop converged entries, then a FISTA fallback.
+
+    A batch of patches converges very unevenly (median ~10, a slow tail of hundreds of iterations);
+    restarting the unconverged rest (warm-started from its current traction) on a smaller batch
+    makes the FFTs of the slow tail cheap. Entries still open after ``cg_iter`` CG iterations are
+    finished by ``fista_tangential_batch`` (needs ``lipschitz``) within ``max_iter`` in total.
+    Same arguments and result keys as ``pk_tangential_batch``.
     """
     B = R.shape[0]
     out = None
     idx = np.arange(B)
-    q_cur = q0
     done_it = 0
     n_it = chunk
     while True:
-        res = pk_tangential_batch(apply_kt, R[idx], s_prev[idx], q_cur[idx] if q_cur.shape[0] == B else q_cur,
-                                  Q[idx], cell_area, tol=tol, max_iter=n_it, raise_on_fail=False,
-                                  omega=None if out is None else out["omega"][idx])
+        use_cg = done_it < cg_iter or lipschitz is None
+        n_it = min(n_it, max_iter - done_it)
+        if use_cg:
+            res = pk_tangential_batch(apply_kt, R[idx], s_prev[idx],
+                                      q0[idx] if out is None else out["traction"][idx], Q[idx], cell_area,
+                                      tol=tol, max_iter=n_it, raise_on_fail=False,
+                                      omega=None if out is None else out["omega"][idx])
+        else:
+            n_it = max_iter - done_it
+            res = fista_tangential_batch(apply_kt, lipschitz, R[idx], s_prev[idx], out["traction"][idx],
+                                         Q[idx], cell_area, tol=tol, max_iter=n_it, raise_on_fail=False)
         if out is None:
             out = {k: v.copy() for k, v in res.items()}
         else:
@@ -244,9 +387,7 @@ def pk_tangential_compacting(apply_kt, R, s_prev, q0, Q, cell_area, *, tol: floa
             raise ConvergenceError(
                 f"solve_tangential: {int((~conv).sum())} of {B} problems not converged to tol={tol:g}",
                 float(np.max(res["residual"][~conv])), done_it)
-        q_next = out["traction"]
         idx = idx[~conv]
-        q_cur = q_next
 
 
 def _unit(shape):
@@ -312,8 +453,9 @@ def solve_tangential(hs: ElasticHalfSpace, ns: NormalSolution, mu: float, forces
             out.append(TangentialState(q, np.full(2, np.nan), np.zeros(grid.shape, bool), loaded.copy(),
                                        q.sum(axis=_AX) * A, s, 0, 0.0, gross_slip=True))
             continue
-        res = pk_tangential_batch(hs._apply_tangential, R[None], s[None], q[None], Qk[None], A,
-                                  tol=tol, max_iter=int(max_iter))
+        res = pk_tangential_compacting(hs._apply_tangential, R[None], s[None], q[None], Qk[None], A,
+                                       tol=tol, max_iter=int(max_iter), lipschitz=hs.tangential_lipschitz,
+                                       cg_iter=min(400, int(max_iter)))  # single solves: CG longer
         q = res["traction"][0]
         shift = res["shift"][0]
         s = shift[:, None, None] - res["displacement"][0]

@@ -117,3 +117,38 @@ def test_non_convergence_and_bad_input(hertz128):
         solve_tangential(hs, ns, -0.1, [(1.0, 0.0)])
     with pytest.raises(ValueError, match="on_gross_slip"):
         solve_tangential(hs, ns, MU, [(1.0, 0.0)], on_gross_slip="ignore")
+
+
+def test_cg_and_fista_fallback_agree():
+    # the two increment solvers are independent algorithms; on a 2D load they must agree
+    from contact_bem.tangential import fista_tangential_batch, pk_tangential_batch
+    es, gs = ref.composite_moduli(E, NU)
+    hz = ref.hertz(P, RS, es)
+    g = Grid((48, 48), (2.6 * hz.radius,) * 2)
+    X, Y = g.meshgrid()
+    c = g.x[24]
+    hs = ElasticHalfSpace(g, E, NU)
+    ns = solve_normal(hs, ((X - c) ** 2 + (Y - c) ** 2) / (2 * RS), load=P)
+    R = (MU * ns.pressure)[None]
+    zero = np.zeros((1, 2) + g.shape)
+    Q = np.array([[0.5, 0.6]]) * MU * P
+    a = pk_tangential_batch(hs._apply_tangential, R, zero, zero, Q, g.cell_area, tol=1e-7, max_iter=5000)
+    b = fista_tangential_batch(hs._apply_tangential, hs.tangential_lipschitz, R, zero, zero, Q, g.cell_area,
+                               tol=1e-7, max_iter=20000)
+    assert np.allclose(a["shift"], b["shift"], rtol=1e-4)
+    assert np.abs(a["traction"] - b["traction"]).max() < 1e-3 * R.max()
+
+
+def test_flat_patch_near_gross_slip_in_2d_converges():
+    # the smooth-surface case of the study: full contact, |Q| = 0.99 μP at an angle
+    from contact_bem import patch_tangential_stiffness
+    rng = np.random.default_rng(0)
+    z = 1e-8 * rng.standard_normal((6, 16, 16))
+    loads = np.linspace(20.0, 200.0, 6)
+    ang = np.linspace(0.0, 2.5, 6)
+    q = np.c_[np.cos(ang), np.sin(ang)] * (1.2 * MU * loads)[:, None]
+    kt, ks, clipped = patch_tangential_stiffness(z, (0.08, 0.08), E, NU, MU, loads, q)
+    assert clipped.all()
+    assert np.all(ks > 0) and np.all(ks < kt)
+    # the reversal slope of a full-contact flat square patch is load independent
+    assert np.allclose(kt, kt[0], rtol=1e-6)
