@@ -98,6 +98,7 @@ class _FFT2:
             self.real_in[...] = 0.0  # planning with MEASURE may scribble on the buffers
         else:  # pragma: no cover
             self.real_in = np.zeros(self.shape)
+            self.spec_in = np.zeros(cshape, dtype=complex)
             self.threads = threads
 
     def forward(self) -> np.ndarray:
@@ -106,12 +107,51 @@ class _FFT2:
             return self._fwd()
         return _sfft.rfft2(self.real_in, workers=self.threads)  # pragma: no cover
 
-    def inverse(self, spec: np.ndarray) -> np.ndarray:
-        """irfft2 of ``spec`` (normalised; returns an internal buffer)."""
+    def inverse(self, spec: np.ndarray | None = None) -> np.ndarray:
+        """irfft2 of ``spec`` or, if None, of ``self.spec_in`` (normalised; returns an internal buffer)."""
         if _HAVE_FFTW:
-            self.spec_in[...] = spec
+            if spec is not None:
+                self.spec_in[...] = spec
             return self._inv()  # pyFFTW normalises the backward transform by default
-        return _sfft.irfft2(spec, s=self.shape[-2:], workers=self.threads)  # pragma: no cover
+        return _sfft.irfft2(self.spec_in if spec is None else spec, s=self.shape[-2:],
+                            workers=self.threads)  # pragma: no cover
+
+
+class _PrunedFFT2:
+    """Zero-padded real 2D FFT pair for DC-FFT: the input lives in the first half of the rows of the
+    padded grid and only that half of the output is needed, so the row transforms run on half the
+    rows (about 25 % fewer flops than the full padded rfft2/irfft2). Same interface as _FFT2:
+    ``real_in`` is (..., nx, 2ny), ``inverse`` returns (..., nx, 2ny)."""
+
+    def __init__(self, shape: tuple[int, ...], threads: int, effort: str):
+        self.shape = tuple(shape)
+        batch, (px, py) = self.shape[:-2], self.shape[-2:]
+        self.nx = px // 2
+        cshape = batch + (px, py // 2 + 1)
+        self.real_in = pyfftw.zeros_aligned(batch + (self.nx, py), dtype="float64")
+        self.spec = pyfftw.zeros_aligned(cshape, dtype="complex128")
+        self.spec_in = pyfftw.zeros_aligned(cshape, dtype="complex128")
+        self.real_out = pyfftw.zeros_aligned(batch + (self.nx, py), dtype="float64")
+        fl = (effort,)
+        self._f_rows = pyfftw.FFTW(self.real_in, self.spec[..., : self.nx, :], axes=(-1,), threads=threads, flags=fl)
+        self._f_cols = pyfftw.FFTW(self.spec, self.spec, axes=(-2,), threads=threads, flags=fl)
+        self._i_cols = pyfftw.FFTW(self.spec_in, self.spec_in, axes=(-2,), threads=threads,
+                                   direction="FFTW_BACKWARD", flags=fl)
+        self._i_rows = pyfftw.FFTW(self.spec_in[..., : self.nx, :], self.real_out, axes=(-1,), threads=threads,
+                                   direction="FFTW_BACKWARD", flags=fl + ("FFTW_DESTROY_INPUT",))
+        self.real_in[...] = 0.0  # planning may scribble on the buffers
+
+    def forward(self) -> np.ndarray:
+        self.spec[..., self.nx:, :] = 0.0  # the in-place column pass filled the padding rows
+        self._f_rows()
+        self._f_cols()
+        return self.spec
+
+    def inverse(self, spec: np.ndarray | None = None) -> np.ndarray:
+        if spec is not None:
+            self.spec_in[...] = spec
+        self._i_cols()  # pyFFTW normalises each backward pass by its own length
+        return self._i_rows()
 
 
 class ElasticHalfSpace:
@@ -126,6 +166,9 @@ class ElasticHalfSpace:
         planner: FFTW planner effort ('FFTW_ESTIMATE', 'FFTW_MEASURE', ...); plans are made once per
             array shape (batch size) and reused.
         alias_terms: M of the periodic alias sum (periodic only; see ``_build_spectra``).
+        periodic_kernel: 'cell' (default: alias-summed cell coefficients, consistent with the
+            non-periodic operator) or 'continuous' (plain 2/(E*|k|) multipliers sampled on the grid,
+            the Stanley–Kato/Tamaas convention; used to compare with Tamaas).
 
     Attributes:
         e_star: composite modulus E/(2(1-ν²)) (MPa).
@@ -134,7 +177,8 @@ class ElasticHalfSpace:
     """
 
     def __init__(self, grid: Grid, young: float = 198400.0, poisson: float = 0.3, periodic: bool = False,
-                 threads: int = 1, planner: str = "FFTW_MEASURE", alias_terms: int = 4):
+                 threads: int = 1, planner: str = "FFTW_MEASURE", alias_terms: int = 4,
+                 periodic_kernel: str = "cell"):
         if not isinstance(grid, Grid):
             raise ValueError(f"grid: expected a contact_bem.Grid, got {type(grid).__name__}")
         self.grid = grid
@@ -150,6 +194,9 @@ class ElasticHalfSpace:
         if int(alias_terms) < 0:
             raise ValueError(f"alias_terms: must be >= 0, got {alias_terms!r}")
         self.alias_terms = int(alias_terms)
+        if periodic_kernel not in ("cell", "continuous"):
+            raise ValueError(f"periodic_kernel: must be 'cell' or 'continuous', got {periodic_kernel!r}")
+        self.periodic_kernel = periodic_kernel
         nu = self.poisson
         self.e_star = self.young / (2.0 * (1.0 - nu ** 2))
         self.shear_modulus = self.young / (2.0 * (1.0 + nu))
@@ -175,15 +222,16 @@ class ElasticHalfSpace:
             nu, g = self.poisson, self.shear_modulus
             shp = np.broadcast(kx0, ky0).shape
             zz, xx, yy, xy = (np.zeros(shp) for _ in range(4))
-            M = self.alias_terms
+            M = self.alias_terms if self.periodic_kernel == "cell" else 0
+            cell = self.periodic_kernel == "cell"
             for m in range(-M, M + 1):
                 kx = kx0 + 2 * np.pi * m / dx
-                sx = np.sinc(kx * dx / (2 * np.pi))
+                sx = np.sinc(kx * dx / (2 * np.pi)) if cell else 1.0
                 for n in range(-M, M + 1):
                     ky = ky0 + 2 * np.pi * n / dy
                     k2 = kx * kx + ky * ky
                     inv_k = np.divide(1.0, np.sqrt(k2), out=np.zeros(shp), where=k2 > 0)
-                    w = sx * np.sinc(ky * dy / (2 * np.pi)) * inv_k
+                    w = sx * (np.sinc(ky * dy / (2 * np.pi)) if cell else 1.0) * inv_k
                     inv_k2 = inv_k * inv_k
                     zz += w
                     xx += w * (1.0 - nu * kx * kx * inv_k2)
@@ -205,7 +253,10 @@ class ElasticHalfSpace:
             self._yy = np.fft.rfft2(c["yy"])
             self._xy = np.fft.rfft2(c["xy"])
         # a real kernel spectrum keeps the products cheaper for the symmetric normal kernel
-        self._zz = np.ascontiguousarray(self._zz.real) if np.allclose(self._zz.imag, 0.0) else self._zz
+        for name in ("_zz", "_xx", "_yy", "_xy"):
+            k = getattr(self, name)
+            if np.iscomplexobj(k) and np.abs(k.imag).max() <= 1e-12 * np.abs(k.real).max():
+                setattr(self, name, np.ascontiguousarray(k.real))
 
     @property
     def tangential_lipschitz(self) -> float:
@@ -218,7 +269,8 @@ class ElasticHalfSpace:
         plan = self._plans.get(shape)
         if plan is None:
             effort = self.planner if np.prod(shape) <= 2 ** 22 else "FFTW_ESTIMATE"
-            plan = _FFT2(shape, self.threads, effort)
+            cls = _PrunedFFT2 if (_HAVE_FFTW and not self.periodic) else _FFT2
+            plan = cls(shape, self.threads, effort)
             self._plans[shape] = plan
         return plan
 
@@ -242,9 +294,8 @@ class ElasticHalfSpace:
         nx, ny = self.grid.shape
         plan = self._plan(p.shape[:-2])
         plan.real_in[..., :nx, :ny] = p
-        spec = plan.forward()
-        spec *= self._zz
-        return plan.inverse(spec)[..., :nx, :ny].copy()
+        np.multiply(plan.forward(), self._zz, out=plan.spec_in)
+        return plan.inverse()[..., :nx, :ny].copy()
 
     def tangential_displacement(self, traction: np.ndarray) -> np.ndarray:
         """Relative tangential displacement u_α = K_αβ * q_β of the two bodies.
@@ -266,12 +317,14 @@ class ElasticHalfSpace:
         plan = self._plan(q.shape[:-2])
         plan.real_in[..., :nx, :ny] = q
         s = plan.forward()
-        sx = s[..., 0, :, :].copy()
+        sx = s[..., 0, :, :]
         sy = s[..., 1, :, :]
-        out = np.empty_like(s)
-        out[..., 0, :, :] = self._xx * sx + self._xy * sy
-        out[..., 1, :, :] = self._xy * sx + self._yy * sy
-        return plan.inverse(out)[..., :nx, :ny].copy()
+        out = plan.spec_in
+        np.multiply(self._xx, sx, out=out[..., 0, :, :])
+        out[..., 0, :, :] += self._xy * sy
+        np.multiply(self._xy, sx, out=out[..., 1, :, :])
+        out[..., 1, :, :] += self._yy * sy
+        return plan.inverse()[..., :nx, :ny].copy()
 
     def kernel(self, component: str = "zz") -> np.ndarray:
         """Real-space influence coefficients (non-periodic only) for inspection.
