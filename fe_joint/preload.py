@@ -374,13 +374,8 @@ def write_preload_fields(problem, res: PreloadResult, out_dir: str) -> None:
     mine = (gd >= lo) & (gd < hi)
     pres.x.array[gd[mine] - lo] = vals[mine]
     pres.x.scatter_forward()
-    # XDMF needs fields on the mesh's own (P2) geometry nodes: P1 interpolation keeps it portable
-    V1 = dolfinx.fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
-    Q1 = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 1))
-    u1 = dolfinx.fem.Function(V1, name="displacement")
-    u1.interpolate(res.displacement)
-    p1 = dolfinx.fem.Function(Q1, name="interface_pressure")
-    p1.interpolate(pres)
+    # P2 fields on the tet10 mesh: XDMF stores them at the geometry nodes (exact nodal values)
+    u1, p1 = res.displacement, pres
     path = os.path.join(out_dir, "preload.xdmf")
     with XDMFFile(comm, path, "w") as xf:
         xf.write_mesh(mesh)

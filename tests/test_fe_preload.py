@@ -118,3 +118,20 @@ def test_contact_solver_two_springs_analytic():
     assert sol.force[0, 2] == pytest.approx(50.0)        # the whole push goes through the contact
     assert sol.force[1, 2] == 0.0
     assert -sol.relative[1, 2] == pytest.approx(60.0 / k)  # gap = 30/k + 30/k
+
+
+def test_toggling_pair_is_frozen_closed_untied():
+    # one pair whose normal and tangential motion are coupled (W_xz != 0): tied, the shear tie pulls
+    # it into tension (N < 0); released, it penetrates (d_z > 0) -> plain PDAS cycles forever
+    W = np.array([[1.0, 0.0, 0.5], [0.0, 1.0, 0.0], [0.5, 0.0, 1.0]])
+    d0 = np.array([1.0, 0.0, 0.1])
+    S = np.eye(9)
+    S[:3, :3] = np.linalg.inv(W)
+    f = np.zeros(9)
+    f[:3] = S[:3, :3] @ d0  # free A-node displacement = d0
+    pa, pb = np.array([[0, 1, 2]]), np.array([[3, 4, 5]])
+    sol = solve_interface_contact(S, f, pa, pb, support=np.array([3, 4, 5, 6, 7, 8]))
+    assert sol.n_toggled == 1 and sol.status[0] == 2  # closed, untied
+    assert sol.force[0, 2] == pytest.approx(0.1 / W[2, 2])  # closes the normal gap exactly
+    assert sol.force[0, 0] == 0.0 and sol.force[0, 1] == 0.0
+    assert sol.relative[0, 2] == pytest.approx(0.0, abs=1e-14)
