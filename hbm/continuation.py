@@ -59,7 +59,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         dof: response DOF for ``amplitude``.
         max_points: stop after this many points.
         ds: initial arc-length step in scaled units (default |Δw|/w_s/100).
-        ds_max, ds_min: step bounds (default 4 ds, 1e-6 ds).
+        ds_max, ds_min: step bounds (default 25 ds, 1e-6 ds).
         max_corrector: corrector iterations before a step is retried shorter.
         stability: "auto" (Hill if small enough, else fold parity), "hill", "fold", "none".
 
@@ -80,7 +80,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
     ws = w0
     if ds is None:
         ds = abs(w1 - w0) / ws / 100.0
-    ds_max = 4 * ds if ds_max is None else ds_max
+    ds_max = 25 * ds if ds_max is None else ds_max
     ds_min = 1e-6 * ds if ds_min is None else ds_min
 
     sol = hb.solve(w0, force)

@@ -52,6 +52,39 @@ def _param(name: str, value, ne: int, lo: float, allow_equal: bool = True) -> np
     return arr
 
 
+#: |det(I - A_cycle)| below which the slider fixed point is treated as neutral (plain iteration)
+NEWTON_DET = 1e-6
+
+
+def _cycle_matrix(closed, slip, rho, that):
+    """Derivative of the end-of-cycle slider w.r.t. the start slider, (k, 2, 2): prod_j A_j with
+    A_j = I (stick), rho (I - t t^T) (slip), 0 (open)."""
+    k, nt = closed.shape
+    P = np.broadcast_to(np.eye(2), (k, 2, 2)).copy()
+    eye = np.eye(2)
+    for j in np.nonzero(~(closed & ~slip).all(axis=0))[0]:
+        t = that[:, j]
+        A = np.where((closed[:, j] & ~slip[:, j])[:, None, None], eye,
+                     rho[:, j, None, None] * (eye - t[:, :, None] * t[:, None, :]))
+        P = A @ P
+    return P
+
+
+def _newton_restart(w_start, w_end, P, active):
+    """Next cycle's start slider: Newton step on w = Phi(w) (the cycle map is piecewise affine in
+    w with slope P), which closes 2D stick-slip cycles in a few periods instead of the slow
+    geometric convergence of plain repetition. Neutral elements (det(I - P) ~ 0, e.g. sticking
+    all the closing cycle) keep the plain repetition, i.e. their history from rest."""
+    M = np.eye(2) - P
+    det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
+    ok = active & (np.abs(det) > NEWTON_DET)
+    w = w_end.copy()
+    if ok.any():
+        d = (w_end - w_start)[ok]
+        w[ok] = w_start[ok] + np.linalg.solve(M[ok], d[:, :, None])[:, :, 0]
+    return w
+
+
 class FrictionContacts:
     """A set of 3D friction elements.
 
@@ -121,7 +154,7 @@ class FrictionContacts:
 
     # ------------------------------------------------------------------ time march
     def march(self, u: np.ndarray, idx: np.ndarray, fourier: Fourier | None = None,
-              jacobian: bool = False):
+              jacobian: bool = False, newton: bool = True):
         """March the elements ``idx`` over periods of the sampled motion until the cycle closes.
 
         The forward pass only carries (k, 2) states. The Jacobian is obtained afterwards from the
@@ -153,14 +186,24 @@ class FrictionContacts:
         rho = np.zeros((k, nt))
         that = np.zeros((k, nt, 2))
         scale = np.maximum(lim_all.max(axis=1), 1e-300) / kt1          # slider length scale, mm
-        if k <= SCALAR_LIMIT:
-            cycle, err, rec = self._forward_scalar(u, kt1, lim_all, closed, T, slip, rho, that,
-                                                   scale, jacobian)
-        else:
-            cycle, err, rec = self._forward_vector(u, kt, lim_all, closed, T, slip, rho, that,
-                                                   scale, jacobian)
+        fwd = self._forward_scalar if k <= SCALAR_LIMIT else self._forward_vector
+        cycle, err, rec, jumped = fwd(u, kt1 if k <= SCALAR_LIMIT else kt, lim_all, closed, T, slip,
+                                      rho, that, scale, jacobian, newton)
         if err > self.close_tol:
             raise ConvergenceError(f"friction cycle did not close in {self.max_cycles} periods", err)
+        # Elements that stick through the whole closing cycle have a neutral, history-dependent
+        # slider; if a Newton restart touched their history, redo them by plain repetition from
+        # rest so that state and Jacobian are those of the march from rest.
+        redo = np.zeros(k, dtype=bool)
+        if newton and jumped.any():
+            P = _cycle_matrix(closed, slip, rho, that)
+            Mf = np.eye(2) - P
+            det = Mf[:, 0, 0] * Mf[:, 1, 1] - Mf[:, 0, 1] * Mf[:, 1, 0]
+            redo = jumped & (np.abs(det) <= NEWTON_DET)
+        if redo.any():
+            sub = self.march(u[redo], idx[redo], fourier, jacobian, newton=False)
+            T[redo], Nall[redo], slip[redo] = sub[0], sub[1], sub[2]
+            cycle = max(cycle, sub[4])
         out = [T, Nall, slip, closed, cycle]
         if jacobian:
             if k <= SCALAR_LIMIT:
@@ -176,12 +219,15 @@ class FrictionContacts:
                 out += [dT, dN]
             else:
                 out += list(self._march_jacobian(rec, closed, kt1, kn, mu, fourier))
+            if redo.any():
+                out[5][redo], out[6][redo] = sub[5], sub[6]
         return out
 
-    def _forward_vector(self, u, kt, lim_all, closed, T, slip, rho, that, scale, jacobian):
+    def _forward_vector(self, u, kt, lim_all, closed, T, slip, rho, that, scale, jacobian, newton):
         """Forward march vectorized over elements (one numpy step per sample)."""
         k, _, nt = u.shape
         w = np.zeros((k, 2))
+        jumped = np.zeros(k, dtype=bool)
         rec = []
         ut_all = np.ascontiguousarray(u[:, 0:2].transpose(2, 0, 1))    # (nt, k, 2)
         err = np.inf
@@ -208,15 +254,22 @@ class FrictionContacts:
                 w = np.where(stick[:, None], w, ut - Tj / kt)
             if jacobian:
                 rec.append((slip.copy(), rho.copy(), that.copy()))
-            err = np.max(np.abs(w - w_start).max(axis=1) / scale) if k else 0.0
+            dev = np.abs(w - w_start).max(axis=1) / scale
+            err = np.max(dev) if k else 0.0
             if err <= self.close_tol:
                 break
-        return cycle, err, rec
+            if newton:
+                w_new = _newton_restart(w_start, w, _cycle_matrix(closed, slip, rho, that),
+                                        dev > self.close_tol)
+                jumped |= np.any(w_new != w, axis=1)
+                w = w_new
+        return cycle, err, rec, jumped
 
-    def _forward_scalar(self, u, kt, lim_all, closed, T, slip, rho, that, scale, jacobian):
+    def _forward_scalar(self, u, kt, lim_all, closed, T, slip, rho, that, scale, jacobian, newton):
         """Forward march with Python floats, element by element (faster for a few elements)."""
         k, _, nt = u.shape
         rec = []
+        jumped = np.zeros(k, dtype=bool)
         cyc_max, err_max = 1, 0.0
         ul = u[:, 0:2].tolist()
         liml, cl = lim_all.tolist(), closed.tolist()
@@ -230,6 +283,7 @@ class FrictionContacts:
             err = np.inf
             for cycle in range(1, self.max_cycles + 1):
                 s1, s2 = w1, w2
+                p11, p12, p21, p22 = 1.0, 0.0, 0.0, 1.0        # cycle matrix (product of A_j)
                 for j in range(nt):
                     a, b = u1[j], u2[j]
                     if not c_e[j]:
@@ -237,6 +291,7 @@ class FrictionContacts:
                         sll[j] = False
                         rl[j] = 0.0
                         w1, w2 = a, b
+                        p11 = p12 = p21 = p22 = 0.0
                         continue
                     x, y = k_e * (a - w1), k_e * (b - w2)
                     tn = math.sqrt(x * x + y * y)
@@ -245,7 +300,12 @@ class FrictionContacts:
                         r = lim / tn
                         sll[j] = True
                         rl[j] = r
-                        t1l[j], t2l[j] = x / tn, y / tn
+                        e1, e2 = x / tn, y / tn
+                        t1l[j], t2l[j] = e1, e2
+                        # A_j = r (I - t t^T); P <- A_j P
+                        a11, a12, a22 = r * (1 - e1 * e1), -r * e1 * e2, r * (1 - e2 * e2)
+                        p11, p12, p21, p22 = (a11 * p11 + a12 * p21, a11 * p12 + a12 * p22,
+                                              a12 * p11 + a22 * p21, a12 * p12 + a22 * p22)
                         x, y = x * r, y * r
                         w1, w2 = a - x / k_e, b - y / k_e
                     else:
@@ -257,25 +317,38 @@ class FrictionContacts:
                 err = max(abs(w1 - s1), abs(w2 - s2)) / scale[e]
                 if err <= self.close_tol:
                     break
+                # Newton restart on the slider fixed point w = Phi(w), Phi' = P (see _newton_restart)
+                m11, m12, m21, m22 = 1 - p11, -p12, -p21, 1 - p22
+                det = m11 * m22 - m12 * m21
+                if newton and abs(det) > NEWTON_DET:
+                    jumped[e] = True
+                    d1, d2 = w1 - s1, w2 - s2
+                    w1 = s1 + (m22 * d1 - m12 * d2) / det
+                    w2 = s2 + (-m21 * d1 + m11 * d2) / det
             T[e, 0], T[e, 1] = Tl1, Tl2
             slip[e], rho[e] = sll, rl
             that[e, :, 0], that[e, :, 1] = t1l, t2l
             cyc_max, err_max = max(cyc_max, cycle), max(err_max, err)
             rec.append(recs)
-        return cyc_max, err_max, rec
+        return cyc_max, err_max, rec, jumped
 
     @staticmethod
     def _march_jacobian(rec, closed, kt, kn, mu, fourier):
-        """Propagate the slider sensitivity through the recorded cycles (see ``march``)."""
+        """Sensitivities of the closed cycle (see ``march``).
+
+        In the final (closed) cycle the slider sensitivity is affine in its start value,
+        dw_j = Phi_j dw_0 + d_j. The start value is that of the periodic state,
+        dw_0 = (I - Phi_nt)^-1 d_nt (implicit derivative of the fixed point w = Phi(w)); for neutral
+        elements (det(I - Phi_nt) ~ 0) it is the plain propagation of the history from rest.
+        """
         k, nt = closed.shape
         nH = fourier.nH
+        nx = 3 * nH
         E = fourier.E
         eye = np.eye(2)
-        dw = np.zeros((k, 2, 3 * nH))
-        for ic, (slip, rho, that) in enumerate(rec):
-            last = ic == len(rec) - 1
+
+        def cycle_ops(slip, rho, that):
             stick = closed & ~slip
-            # A_j (k, nt, 2, 2); S_j (k, nt, 2, 3); Q_j (k, nt, 2, 3)
             P = eye - that[..., :, None] * that[..., None, :]
             A = np.where(stick[..., None, None], eye, rho[..., None, None] * P)
             c = (mu[:, None, None] * slip[..., None]) * that                 # (k, nt, 2)
@@ -284,24 +357,48 @@ class FrictionContacts:
             S[..., 0:2] = eye - A
             S[..., 2] = -cn / kt[:, None, None]
             active = np.nonzero(~stick.all(axis=0))[0]                       # samples where dw may change
-            snaps = [dw]
-            for j in active:
-                dw = A[:, j] @ dw + (S[:, j, :, :, None] * E[j]).reshape(k, 2, 3 * nH)
-                snaps.append(dw)
-            if last:
-                # dw seen at sample j = after the updates of the active samples before j
-                which = np.searchsorted(active, np.arange(nt), side="left")
-                dws = np.stack(snaps, axis=1)[:, which]                      # (k, nt, 2, 3 nH)
-                Q = np.empty((k, nt, 2, 3))
-                Q[..., 0:2] = kt[:, None, None, None] * A
-                Q[..., 2] = cn
-                # dT_j = Q_j (x) E_j - kt A_j dw_j
-                dT = Q[..., None] * E[None, :, None, None, :]
-                dT = dT.reshape(k, nt, 2, 3 * nH) - kt[:, None, None, None] * (A @ dws)
-                dT = dT.transpose(0, 2, 1, 3)
-                dN = np.zeros((k, nt, 3, nH))
-                dN[:, :, 2] = (kn[:, None] * closed)[..., None] * E[None]
-                return dT, dN.reshape(k, nt, 3 * nH)
+            return A, cn, S, active
+
+        def src(S, j):
+            return (S[:, j, :, :, None] * E[j]).reshape(k, 2, nx)
+
+        # final cycle with dw_0 = 0: particular part d_j and homogeneous part Phi_j
+        A, cn, S, active = cycle_ops(*rec[-1])
+        d = np.zeros((k, 2, nx))
+        Ph = np.broadcast_to(eye, (k, 2, 2)).copy()
+        snaps_d, snaps_P = [d], [Ph]
+        for j in active:
+            d = A[:, j] @ d + src(S, j)
+            Ph = A[:, j] @ Ph
+            snaps_d.append(d)
+            snaps_P.append(Ph)
+        Mfix = eye - Ph
+        det = Mfix[:, 0, 0] * Mfix[:, 1, 1] - Mfix[:, 0, 1] * Mfix[:, 1, 0]
+        fixed = np.abs(det) > NEWTON_DET
+        dw0 = np.zeros((k, 2, nx))
+        if fixed.any():
+            dw0[fixed] = np.linalg.solve(Mfix[fixed], d[fixed])
+        if (~fixed).any() and len(rec) > 1:
+            dwh = np.zeros((k, 2, nx))
+            for cyc in rec[:-1]:
+                Ac, _, Sc, act = cycle_ops(*cyc)
+                for j in act:
+                    dwh = Ac[:, j] @ dwh + src(Sc, j)
+            dw0[~fixed] = dwh[~fixed]
+        # dw seen at sample j = after the updates of the active samples before j
+        which = np.searchsorted(active, np.arange(nt), side="left")
+        dws = (np.stack(snaps_P, axis=1)[:, which] @ dw0[:, None]
+               + np.stack(snaps_d, axis=1)[:, which])                         # (k, nt, 2, nx)
+        Q = np.empty((k, nt, 2, 3))
+        Q[..., 0:2] = kt[:, None, None, None] * A
+        Q[..., 2] = cn
+        # dT_j = Q_j (x) E_j - kt A_j dw_j
+        dT = (Q[..., None] * E[None, :, None, None, :]).reshape(k, nt, 2, nx)
+        dT = dT - kt[:, None, None, None] * (A @ dws)
+        dT = dT.transpose(0, 2, 1, 3)
+        dN = np.zeros((k, nt, 3, nH))
+        dN[:, :, 2] = (kn[:, None] * closed)[..., None] * E[None]
+        return dT, dN.reshape(k, nt, nx)
 
     # ------------------------------------------------------------------ AFT
     def evaluate(self, U: np.ndarray, fourier: Fourier, jacobian: bool = True):

@@ -147,11 +147,18 @@ class Receptance:
         return self.Psi @ self._mul(self.modal(h, omega), self.Psi.T @ c) + self.R @ c
 
     def force_response(self, h: int, omega: float, f: np.ndarray):
-        """Modal participation of an external force: returns (u_contact, None) with u = B H_h f."""
+        """Contact response u = B H_h f to an external force f (n,) (complex)."""
+        key = f.tobytes()
+        cached = getattr(self, "_fcache", None)
+        if cached is None or cached[0] != key:
+            # the modal projection and the static residual response do not depend on omega
+            res = None if self.complete else (self.B @ self.residual_full(f.real)
+                                              + 1j * (self.B @ self.residual_full(f.imag)))
+            self._fcache = cached = (key, self.Phi.T @ f, res)
         L = self.modal(h, omega)
-        u = self.Psi @ self._mul(L, self.Phi.T @ f)
-        if not self.complete:
-            u = u + self.B @ self.residual_full(f)
+        u = self.Psi @ self._mul(L, cached[1])
+        if cached[2] is not None:
+            u = u + cached[2]
         return u
 
     def residual_full(self, y: np.ndarray) -> np.ndarray:
