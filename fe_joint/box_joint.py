@@ -13,14 +13,15 @@ meshing traps, so the FE physics can be tested on coarse meshes in seconds:
 
 The hexahedra are split into 6 tetrahedra (Kuhn split) mirrored about y = 0, so the mesh and
 every field on it are mirror-symmetric about the plane y = 0. Nodes are numbered like gmsh
-(tet10 / tri6 in gmsh order), and the returned :class:`JointMeshData` has the field names of
-``geometry.resonator.ResonatorMesh`` that the FE chain reads.
+(tet10 / tri6 in gmsh order) and the result is a ``geometry.resonator.ResonatorMesh`` (its
+``params`` is a dict of the fixture's lengths instead of ``ResonatorParams``), so
+``fe_joint.mesh.mesh_from_data`` distributes it like the real resonator.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
+
+from geometry.resonator import ResonatorMesh
 
 # gmsh tet10 edge order: nodes 4..9 sit on edges (0,1), (1,2), (2,0), (3,0), (3,2), (3,1)
 _TET10_EDGES = np.array([[0, 1], [1, 2], [2, 0], [3, 0], [3, 2], [3, 1]])
@@ -28,36 +29,6 @@ _TET10_EDGES = np.array([[0, 1], [1, 2], [2, 0], [3, 0], [3, 2], [3, 1]])
 _TRI6_EDGES = np.array([[0, 1], [1, 2], [2, 0]])
 # faces of a tet (vertex triplets) and, for each, the tet10 local indices of the tri6 nodes
 _TET_FACES = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
-
-
-@dataclass
-class JointMeshData:
-    """Mesh and interface data of a lap joint (field names of ``ResonatorMesh``).
-
-    Attributes:
-        points: (n_nodes, 3) node coordinates, mm.
-        cells: (n_cells, 10) tet10 connectivity, gmsh node order.
-        cell_markers: (n_cells,) 1 plate A, 2 plate B, 3 shank, 4 head, 5 nut.
-        facets: (n_facets, 6) tri6 connectivity of the lap faces, gmsh order.
-        facet_markers: (n_facets,) 11 lap A, 12 lap B.
-        pair_nodes: (n_pairs, 2) matched node indices on A and B.
-        pair_xyz: (n_pairs, 3) pair coordinates, mm.
-        pair_area: (n_pairs,) tributary area, mm² (tri6 split: vertex A/12, mid-edge A/4).
-        excitation_node, response_node: node indices (on plate A).
-        params: the generating parameters.
-    """
-
-    points: np.ndarray
-    cells: np.ndarray
-    cell_markers: np.ndarray
-    facets: np.ndarray
-    facet_markers: np.ndarray
-    pair_nodes: np.ndarray
-    pair_xyz: np.ndarray
-    pair_area: np.ndarray
-    excitation_node: int
-    response_node: int
-    params: dict = field(default_factory=dict)
 
 
 def _kuhn_tets(nx: int, ny: int, nz: int) -> np.ndarray:
@@ -88,7 +59,7 @@ def _kuhn_tets(nx: int, ny: int, nz: int) -> np.ndarray:
 
 def build_box_joint(half: float = 10.0, thickness: float = 4.0, cell: float = 2.0,
                     shank_half: float = 2.0, hole_half: float = 4.0,
-                    head: float | None = None) -> JointMeshData:
+                    head: float | None = None) -> ResonatorMesh:
     """Build the structured bolted-lap-joint fixture.
 
     Args:
@@ -100,7 +71,8 @@ def build_box_joint(half: float = 10.0, thickness: float = 4.0, cell: float = 2.
         head: thickness of head and nut layers, mm (default ``cell``; < thickness).
 
     Returns:
-        JointMeshData with tet10 cells, matched lap pairs and tributary areas.
+        ResonatorMesh with tet10 cells, tri6 lap facets (11 A, 12 B), matched pairs (x-then-y order),
+        tributary areas (vertex A/12, mid-edge A/4), excitation/response nodes on plate A.
     """
     head = cell if head is None else head
     for name, val in (("half", half), ("thickness", thickness), ("cell", cell),
@@ -192,7 +164,7 @@ def build_box_joint(half: float = 10.0, thickness: float = 4.0, cell: float = 2.
     a_nodes = np.unique(cells[marker == 1])
     exc = nearest(np.array([-half, 0.0, -thickness]), a_nodes)
     resp = nearest(np.array([-half, 0.0, -thickness / 2]), a_nodes)
-    return JointMeshData(points=pts, cells=cells.astype(np.int64), cell_markers=marker.astype(np.int32),
+    return ResonatorMesh(points=pts, cells=cells.astype(np.int64), cell_markers=marker.astype(np.int32),
                          facets=facets.astype(np.int64), facet_markers=facet_markers.astype(np.int32),
                          pair_nodes=pair_nodes.astype(np.int64), pair_xyz=pts[pair_nodes[:, 0]].copy(),
                          pair_area=pair_area, excitation_node=exc, response_node=resp,

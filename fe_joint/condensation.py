@@ -18,6 +18,8 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fe_joint.modal import mumps_cholesky
+
 
 class BoundaryCondensation:
     """Boundary/interior split of assembled K (and M) with a factorized K_II.
@@ -56,14 +58,10 @@ class BoundaryCondensation:
             self.MBB = M.createSubMatrix(self.isB, self.isB)
         for A in (self.KII,) + ((self.MII,) if M is not None else ()):
             A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        self.ksp = PETSc.KSP().create(self.comm)
+        self.ksp = mumps_cholesky(PETSc.KSP().create(self.comm))
         self.ksp.setOperators(self.KII)
-        self.ksp.setType(PETSc.KSP.Type.PREONLY)
-        pc = self.ksp.getPC()
-        pc.setType(PETSc.PC.Type.CHOLESKY)
-        pc.setFactorSolverType("mumps")
         self.ksp.setUp()
-        self.factor = pc.getFactorMatrix()
+        self.factor = self.ksp.getPC().getFactorMatrix()
 
     # ---- helpers -------------------------------------------------------------------------
     def _gather_b_rows(self, local: np.ndarray) -> np.ndarray:

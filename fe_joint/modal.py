@@ -42,6 +42,15 @@ class ModalResult:
         return self.frequencies[self.n_rigid:]
 
 
+def mumps_cholesky(ksp: PETSc.KSP) -> PETSc.KSP:
+    """Configure a KSP as a direct MUMPS Cholesky solve (K, M symmetric; measured fastest here)."""
+    ksp.setType(PETSc.KSP.Type.PREONLY)
+    pc = ksp.getPC()
+    pc.setType(PETSc.PC.Type.CHOLESKY)
+    pc.setFactorSolverType("mumps")
+    return ksp
+
+
 def _mark_symmetric(*mats):
     for A in mats:
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
@@ -79,11 +88,7 @@ def solve_eigenproblem(K: PETSc.Mat, M: PETSc.Mat, nev: int, sigma: float = 0.0,
     st = eps.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
     st.setShift(sigma)
-    ksp = st.getKSP()
-    ksp.setType(PETSc.KSP.Type.PREONLY)
-    pc = ksp.getPC()
-    pc.setType(PETSc.PC.Type.CHOLESKY)
-    pc.setFactorSolverType("mumps")
+    mumps_cholesky(st.getKSP())
     eps.solve()
     nconv = eps.getConverged()
     if nconv < nev:

@@ -17,7 +17,7 @@ import numpy as np
 from petsc4py import PETSc
 
 from fe_joint.condensation import BoundaryCondensation
-from fe_joint.modal import free_modes, solve_eigenproblem, to_hz
+from fe_joint.modal import free_modes, mumps_cholesky, solve_eigenproblem, to_hz
 from fe_joint.reduced_model import ReducedModel, check_damping_ratio, modal_damping_matrix
 
 
@@ -36,12 +36,9 @@ def count_modes_below(K, M, cutoff_hz: float) -> int:
     sigma = (2 * np.pi * cutoff_hz) ** 2
     A = K.copy()
     A.axpy(-sigma, M)
-    ksp = PETSc.KSP().create(K.getComm())
+    ksp = mumps_cholesky(PETSc.KSP().create(K.getComm()))
     ksp.setOperators(A)
-    ksp.setType(PETSc.KSP.Type.PREONLY)
     pc = ksp.getPC()
-    pc.setType(PETSc.PC.Type.CHOLESKY)
-    pc.setFactorSolverType("mumps")
     pc.setFactorSetUpSolverType()
     F = pc.getFactorMatrix()
     F.setMumpsIcntl(13, 1)
