@@ -284,11 +284,17 @@ class ElasticHalfSpace:
         Returns:
             (..., nx, ny) displacement in mm (positive = the bodies are pushed apart).
         """
-        p = np.asarray(pressure, dtype=float)
-        nx, ny = self.grid.shape
-        if p.shape[-2:] != (nx, ny):
-            raise ValueError(f"pressure: expected shape (..., {nx}, {ny}), got {p.shape}")
-        return self._apply_normal(p)
+        return self._apply_normal(self._checked("pressure", pressure, ()))
+
+    def _checked(self, name: str, value, lead: tuple) -> np.ndarray:
+        """Finite float array whose trailing axes are ``lead + grid.shape`` (ValueError otherwise)."""
+        a = np.asarray(value, dtype=float)
+        want = tuple(lead) + self.grid.shape
+        if a.shape[a.ndim - len(want):] != want or a.ndim < len(want):
+            raise ValueError(f"{name}: expected shape (..., {', '.join(map(str, want))}), got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name}: must be finite (no NaN/inf)")
+        return a
 
     def _apply_normal(self, p: np.ndarray) -> np.ndarray:
         nx, ny = self.grid.shape
@@ -306,11 +312,7 @@ class ElasticHalfSpace:
         Returns:
             (..., 2, nx, ny) tangential displacement in mm.
         """
-        q = np.asarray(traction, dtype=float)
-        nx, ny = self.grid.shape
-        if q.shape[-3:] != (2, nx, ny):
-            raise ValueError(f"traction: expected shape (..., 2, {nx}, {ny}), got {q.shape}")
-        return self._apply_tangential(q)
+        return self._apply_tangential(self._checked("traction", traction, (2,)))
 
     def _apply_tangential(self, q: np.ndarray) -> np.ndarray:
         nx, ny = self.grid.shape

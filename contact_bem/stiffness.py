@@ -330,13 +330,18 @@ def patch_normal_stiffness(patches, cell_size, young: float, poisson: float, loa
     """
     z, cell, W = _check_patches(patches, cell_size, young, poisson, loads)
     hs, p = _patch_normal(z, cell, young, poisson, W, periodic, threads, tol)
+    k = _patch_kn(hs, p)
+    return (k, p) if return_pressure else k
+
+
+def _patch_kn(hs: ElasticHalfSpace, p: np.ndarray) -> np.ndarray:
+    """k_n (np,) N/mm³ of solved patches with pressures p (np, n, m); 0 without contact."""
     contact = p > 0
-    k = np.zeros(z.shape[0])
+    k = np.zeros(p.shape[0])
     has = contact.any(axis=_AX)
     if has.any():
         k[has] = _normal_tangent(hs, contact[has], 1e-10)
-    k /= hs.grid.area
-    return (k, p) if return_pressure else k
+    return k / hs.grid.area
 
 
 def patch_tangential_stiffness(patches, cell_size, young: float, poisson: float, mu: float, loads,
@@ -434,11 +439,6 @@ def patch_stiffness(patches, cell_size, young: float, poisson: float, mu: float,
     """
     z, cell, W = _check_patches(patches, cell_size, young, poisson, loads)
     hs, p = _patch_normal(z, cell, young, poisson, W, periodic, threads, tol)
-    contact = p > 0
-    kn = np.zeros(z.shape[0])
-    has = contact.any(axis=_AX)
-    if has.any():
-        kn[has] = _normal_tangent(hs, contact[has], 1e-10)
-    kn /= hs.grid.area
+    kn = _patch_kn(hs, p)
     kt, sec, clipped = _patch_tangential(hs, p, W, mu, q_amplitudes, tangential_tol, secant, max_ratio)
-    return PatchStiffness(kn, kt, sec, clipped, contact.mean(axis=_AX))
+    return PatchStiffness(kn, kt, sec, clipped, (p > 0).mean(axis=_AX))

@@ -138,27 +138,10 @@ def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndar
     stall = np.zeros(B, dtype=int)
     tau_self = 0.5 / abs(apply_kt(_unit(q.shape[2:]))[0, 0, 0, 0])
     for it in range(max_iter + 1):
-        g = u + s_prev
-        qn = np.sqrt(q[:, 0] ** 2 + q[:, 1] ** 2)
-        S = loaded & (qn < R * (1 - 1e-10))
-        SL = loaded & ~S
-        nS = S.sum(axis=_AX)
-        gbar = np.where(S[:, None], g, 0.0).sum(axis=_AX) / np.maximum(nS, 1)[:, None]
-        # no stick cell (transient near μP): the R-weighted mean over the loaded cells, so that the
-        # cells lagging behind the rigid shift are released back into stick
-        gall = (R[:, None] * g).sum(axis=_AX) / Rw[:, None]
-        delta = np.where(active[:, None], np.where((nS > 0)[:, None], gbar, gall), delta)
-        g = g - delta[:, :, None, None]
-        # --- KKT residual of the current iterate ---
-        qhat = q / np.where(qn > 0, qn, 1.0)[:, None]
-        gq = (g * qhat).sum(axis=1)
-        gt = g[:, 1] * qhat[:, 0] - g[:, 0] * qhat[:, 1]
-        gabs = np.sqrt(gq * gq + gt * gt)
-        res = np.where(S, gabs, np.where(SL, np.where(gq <= 0, np.abs(gt), gabs), 0.0))
-        scale = np.maximum(np.maximum(np.abs(delta).max(axis=1), np.abs(u).max(axis=(1, 2, 3))), 1e-300)
-        e1 = (R * res).sum(axis=_AX) / (Rw * scale)
-        e3 = np.sqrt(((A * q.sum(axis=_AX) - Q) ** 2).sum(axis=1)) / fscale
-        err = np.where(active, np.maximum(e1, e3), err)
+        e, delta_new, parts = _kkt_error(q, u, s_prev, R, Rw, Q, A, fscale)
+        delta = np.where(active[:, None], delta_new, delta)
+        S, SL, nS, g = parts["S"], parts["SL"], parts["nS"], parts["g"]
+        err = np.where(active, e, err)
         active &= ~(err < tol)
         if _DEBUG:
             print(it, err, omega, S.sum(axis=_AX), SL.sum(axis=_AX), delta[0])
@@ -214,13 +197,20 @@ def pk_tangential_batch(apply_kt, R: np.ndarray, s_prev: np.ndarray, q0: np.ndar
 
 
 def _kkt_error(q, u, s_prev, R, Rw, Q, A, fscale):
-    """KKT error (B,), shift δ (B, 2) and stick mask of an iterate (see module docstring)."""
+    """KKT error of an iterate (see module docstring).
+
+    Returns:
+        (err (B,), δ (B, 2), parts) with parts = dict of the stick/slip masks S, SL, their count nS,
+        the gradient g = K*q + s⁰ − δ, the unit traction direction qhat and g·qhat (gq).
+    """
     g = u + s_prev
     qn = np.sqrt(q[:, 0] ** 2 + q[:, 1] ** 2)
     S = (R > 0) & (qn < R * (1 - 1e-10))
     SL = (R > 0) & ~S
     nS = S.sum(axis=_AX)
     gbar = np.where(S[:, None], g, 0.0).sum(axis=_AX) / np.maximum(nS, 1)[:, None]
+    # no stick cell (transient near μP): the R-weighted mean over the loaded cells, so that the
+    # cells lagging behind the rigid shift are released back into stick
     gall = (R[:, None] * g).sum(axis=_AX) / Rw[:, None]
     delta = np.where((nS > 0)[:, None], gbar, gall)
     g = g - delta[:, :, None, None]
@@ -232,7 +222,7 @@ def _kkt_error(q, u, s_prev, R, Rw, Q, A, fscale):
     scale = np.maximum(np.maximum(np.abs(delta).max(axis=1), np.abs(u).max(axis=(1, 2, 3))), 1e-300)
     e1 = (R * res).sum(axis=_AX) / (Rw * scale)
     e3 = np.sqrt(((A * q.sum(axis=_AX) - Q) ** 2).sum(axis=1)) / fscale
-    return np.maximum(e1, e3), delta, S
+    return np.maximum(e1, e3), delta, {"S": S, "SL": SL, "nS": nS, "g": g, "qhat": qhat, "gq": gq}
 
 
 def _project_force(y, R, Q, A, lam, ftol: float = 1e-11):
@@ -318,7 +308,7 @@ def fista_tangential_batch(apply_kt, lipschitz: float, R, s_prev, q0, Q, cell_ar
     for it in range(max_iter + 1):
         if it % check_every == 0 or it == max_iter:
             ux = apply_kt(x)
-            e, delta, S = _kkt_error(x, ux, s_prev, R, Rw, Q, A, fscale)
+            e, delta, _ = _kkt_error(x, ux, s_prev, R, Rw, Q, A, fscale)
             err = np.where(active, e, err)
             active &= ~(err < tol)
             if not active.any() or it == max_iter:
@@ -340,7 +330,8 @@ def fista_tangential_batch(apply_kt, lipschitz: float, R, s_prev, q0, Q, cell_ar
             f"solve_tangential: {int(active.sum())} of {B} problems not converged to tol={tol:g}",
             float(np.max(err[active])), int(iters.max()))
     ux = apply_kt(x)
-    e, delta, S = _kkt_error(x, ux, s_prev, R, Rw, Q, A, fscale)
+    e, delta, parts = _kkt_error(x, ux, s_prev, R, Rw, Q, A, fscale)
+    S = parts["S"]
     return {"traction": x, "displacement": ux, "shift": delta, "stick": S, "iterations": iters,
             "residual": e, "converged": ~active, "omega": np.ones(B)}
 
