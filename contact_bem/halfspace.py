@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import finite_array, positive_scalar
+from .errors import positive_scalar
 from .grid import Grid
 
 try:  # pyFFTW is the fast path; scipy.fft keeps the package usable without it

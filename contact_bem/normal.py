@@ -25,11 +25,11 @@ All internals are batched over a leading axis so that many small patches solve a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import ConvergenceError, finite_array, positive_scalar
+from .errors import ConvergenceError, positive_scalar
 from .halfspace import ElasticHalfSpace
 
 _AX = (-2, -1)

@@ -16,7 +16,7 @@ A is the patch (grid or mask) area, so k·A is the element stiffness.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -25,7 +25,7 @@ from .errors import ConvergenceError, finite_array, positive_scalar
 from .grid import Grid
 from .halfspace import ElasticHalfSpace
 from .normal import NormalSolution, pk_normal_batch, solve_normal
-from .tangential import TangentialState, pk_tangential_compacting, solve_tangential
+from .tangential import pk_tangential_compacting, solve_tangential
 
 _AX = (-2, -1)
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import finite_array, positive_scalar
+from .errors import positive_scalar
 from .grid import Grid
 
 
