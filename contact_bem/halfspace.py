@@ -54,7 +54,7 @@ def _corner_sum(f, x: np.ndarray, y: np.ndarray, a: float, b: float) -> np.ndarr
 
 
 def influence_coefficients(x: np.ndarray, y: np.ndarray, dx: float, dy: float, young: float,
-                           poisson: float) -> dict[str, np.ndarray]:
+                           poisson: float, components=("zz", "xx", "yy", "xy")) -> dict[str, np.ndarray]:
     """Relative displacements at offsets (x, y) due to a unit uniform traction on one cell.
 
     Args:
@@ -63,21 +63,27 @@ def influence_coefficients(x: np.ndarray, y: np.ndarray, dx: float, dy: float, y
         young: Young's modulus E (MPa) of each (identical) body.
         poisson: Poisson ratio ν.
 
+        components: which of 'zz', 'xx', 'yy', 'xy' to compute.
+
     Returns:
-        dict with 'zz', 'xx', 'yy', 'xy' arrays (mm per MPa): relative displacement per unit traction.
+        dict with the requested arrays (mm per MPa): relative displacement per unit traction.
     """
     a, b = 0.5 * dx, 0.5 * dy
     e_star = young / (2.0 * (1.0 - poisson ** 2))
     g = young / (2.0 * (1.0 + poisson))
-    t1 = _corner_sum(lambda u, v: _asinh_term(u, v), x, y, a, b)   # ∫∫ y²/r³
-    t2 = _corner_sum(lambda u, v: _asinh_term(v, u), x, y, a, b)   # ∫∫ x²/r³
-    tr = _corner_sum(lambda u, v: -np.hypot(u, v), x, y, a, b)     # ∫∫ xy/r³
-    return {
-        "zz": (t1 + t2) / (np.pi * e_star),
-        "xx": ((1.0 - poisson) * t1 + t2) / (np.pi * g),
-        "yy": (t1 + (1.0 - poisson) * t2) / (np.pi * g),
-        "xy": poisson * tr / (np.pi * g),
-    }
+    out = {}
+    if set(components) & {"zz", "xx", "yy"}:
+        t1 = _corner_sum(lambda u, v: _asinh_term(u, v), x, y, a, b)   # ∫∫ y²/r³
+        t2 = _corner_sum(lambda u, v: _asinh_term(v, u), x, y, a, b)   # ∫∫ x²/r³
+        if "zz" in components:
+            out["zz"] = (t1 + t2) / (np.pi * e_star)
+        if "xx" in components:
+            out["xx"] = ((1.0 - poisson) * t1 + t2) / (np.pi * g)
+        if "yy" in components:
+            out["yy"] = (t1 + (1.0 - poisson) * t2) / (np.pi * g)
+    if "xy" in components:
+        out["xy"] = poisson * _corner_sum(lambda u, v: -np.hypot(u, v), x, y, a, b) / (np.pi * g)  # ∫∫ xy/r³
+    return out
 
 
 class _FFT2:
@@ -207,7 +213,7 @@ class ElasticHalfSpace:
         self._build_spectra()
 
     # ------------------------------------------------------------------ kernels
-    def _build_spectra(self) -> None:
+    def _build_spectra(self, tangential: bool = False) -> None:
         nx, ny = self.grid.shape
         px, py = self.padded_shape
         if self.periodic:
@@ -246,21 +252,27 @@ class ElasticHalfSpace:
             iy = np.arange(py)
             ox = np.where(ix < nx, ix, ix - px) * self.grid.dx
             oy = np.where(iy < ny, iy, iy - py) * self.grid.dy
+            # the tangential kernels are built on first use (normal-only solves skip their cost)
+            names = ("zz",) if not tangential else ("xx", "yy", "xy")
             c = influence_coefficients(ox[:, None], oy[None, :], self.grid.dx, self.grid.dy,
-                                       self.young, self.poisson)
-            self._zz = np.fft.rfft2(c["zz"])
-            self._xx = np.fft.rfft2(c["xx"])
-            self._yy = np.fft.rfft2(c["yy"])
-            self._xy = np.fft.rfft2(c["xy"])
-        # a real kernel spectrum keeps the products cheaper for the symmetric normal kernel
+                                       self.young, self.poisson, components=names)
+            for name in names:
+                setattr(self, "_" + name, np.fft.rfft2(c[name]))
+        self._tangential_ready = self.periodic or tangential
+        # kernels even in x and y have real spectra: real multipliers halve the product cost
         for name in ("_zz", "_xx", "_yy", "_xy"):
-            k = getattr(self, name)
-            if np.iscomplexobj(k) and np.abs(k.imag).max() <= 1e-12 * np.abs(k.real).max():
+            k = getattr(self, name, None)
+            if k is not None and np.iscomplexobj(k) and np.abs(k.imag).max() <= 1e-12 * np.abs(k.real).max():
                 setattr(self, name, np.ascontiguousarray(k.real))
+
+    def _ensure_tangential(self) -> None:
+        if not self._tangential_ready:
+            self._build_spectra(tangential=True)
 
     @property
     def tangential_lipschitz(self) -> float:
         """Largest eigenvalue (mm/MPa) of the tangential operator (bound from its symbol)."""
+        self._ensure_tangential()
         xx, yy, xy = self._xx.real, self._yy.real, self._xy.real
         return float(np.max(0.5 * (xx + yy) + np.sqrt(0.25 * (xx - yy) ** 2 + xy ** 2)))
 
@@ -315,6 +327,7 @@ class ElasticHalfSpace:
         return self._apply_tangential(self._checked("traction", traction, (2,)))
 
     def _apply_tangential(self, q: np.ndarray) -> np.ndarray:
+        self._ensure_tangential()
         nx, ny = self.grid.shape
         plan = self._plan(q.shape[:-2])
         plan.real_in[..., :nx, :ny] = q

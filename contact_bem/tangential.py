@@ -11,7 +11,11 @@ cell) and the rigid tangential shift δ satisfy, with the slip s = δ − K_t*q,
 which is the minimum of ½ qᵀK_t q + qᵀs⁰ over the disks |q_i| ≤ μ p_i with the force constraint
 (δ is its Lagrange multiplier). It is solved with a Polonsky–Keer-type constrained conjugate
 gradient on the stick set, projected-gradient moves of the slip cells, projection on the disks and a
-uniform force correction on the stick set. The history enters only through s⁰, so loading,
+uniform force correction on the stick set (restarted from its best iterate with a halved slip step if
+it stalls or diverges). Entries it has not finished after a few hundred iterations (typically almost
+all cells slipping just below μP with a 2D slip-direction field) are completed by an accelerated
+projected gradient (FISTA with adaptive restart, exact projection on disks ∩ force constraint), which
+converges for every instance of this convex problem. The history enters only through s⁰, so loading,
 unloading and reloading (Mindlin–Deresiewicz) follow from successive increments.
 
 Stopping criterion: the pressure-weighted mean of the KKT displacement residual (|g| on stick cells,
