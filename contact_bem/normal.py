@@ -139,19 +139,29 @@ def pk_normal_batch(apply_k, h: np.ndarray, allowed: np.ndarray, cell_area: floa
     unit[0, 0, 0] = 1.0
     tau_self = 0.5 / apply_k(unit)[0, 0, 0]
     u = apply_k(p)
+    # the loop is memory-bound at large grids: masked reductions use ``where=`` instead of
+    # temporaries, and the hardness/mask tests are skipped when they cannot bind
+    capped = hardness is not None
+    masked = not allowed.all()
+    kw = dict(axis=_AX, keepdims=True)
     for it in range(max_iter + 1):
         g = h + u
-        Ic = (p > 0) & (p < H) & allowed
-        nIc = _bsum(Ic.astype(float))
+        Ic = p > 0
+        if capped:
+            Ic &= p < H
+        if masked:
+            Ic &= allowed
+        nIc = np.sum(Ic, **kw)
         if load_ctrl:
-            gbar = np.where(nIc > 0, _bsum(np.where(Ic, g, 0.0)) / np.maximum(nIc, 1), hmin)
+            gbar = np.where(nIc > 0, np.sum(g, where=Ic, **kw) / np.maximum(nIc, 1), hmin)
             delta = np.where(active.reshape(B, 1, 1), gbar, delta)
-        g = g - delta
+        g -= delta
         # --- error of the current iterate (p, g consistent) ---
-        scale = np.maximum(np.maximum(hrange, np.abs(u).max(axis=_AX, keepdims=True)), 1e-300)
-        psum = _bsum(p)
-        e1 = _bsum(np.where(Ic, p * np.abs(g), 0.0)) / (np.where(psum > 0, psum, 1.0) * scale)
-        e2 = np.where(allowed & (p <= 0), np.maximum(-g, 0.0), 0.0).max(axis=_AX, keepdims=True) / scale
+        scale = np.maximum(np.maximum(hrange, np.max(np.abs(u), **kw)), 1e-300)
+        psum = np.sum(p, **kw)
+        e1 = np.sum(p * np.abs(g), where=Ic, **kw) / (np.where(psum > 0, psum, 1.0) * scale)
+        out = (p <= 0) & allowed if masked else p <= 0
+        e2 = np.max(-g, where=out, initial=0.0, **kw) / scale
         e = np.maximum(e1, e2)
         if load_ctrl:
             e = np.maximum(e, np.abs(psum * cell_area - W) / np.where(W > 0, W, 1.0))
@@ -163,31 +173,38 @@ def pk_normal_batch(apply_k, h: np.ndarray, allowed: np.ndarray, cell_area: floa
         iters += active
         act = active.reshape(B, 1, 1)
         # --- conjugate direction on the contact set ---
-        G = _bsum(np.where(Ic, g * g, 0.0))
+        G = np.sum(g * g, where=Ic, **kw)
         beta = np.where(use_beta, G / np.where(G_old > 0, G_old, 1.0), 0.0)
         beta = np.where(beta < 1e4, beta, 0.0)  # a vanishing previous gradient: restart, don't blow up
-        t = np.where(Ic, g + beta * t, 0.0)
+        t *= beta
+        t += g
+        t *= Ic
         G_old = np.where(act, G, G_old)
         r = apply_k(t)
         if load_ctrl:
-            r = r - _bsum(np.where(Ic, r, 0.0)) / np.maximum(nIc, 1)
-        num = _bsum(np.where(Ic, g * t, 0.0))
-        den = _bsum(np.where(Ic, r * t, 0.0))
+            r -= np.sum(r, where=Ic, **kw) / np.maximum(nIc, 1)
+        num = np.sum(g * t, **kw)          # t = 0 outside the contact set
+        den = np.sum(r * t, **kw)
         # a single contact cell has a zero-mean gradient (t = 0): step the overlap set with the
         # self-compliance scale instead so that new cells can still enter the contact
         tau = np.where((den > 0) & (num > 0), num / np.where(den > 0, den, 1.0), tau_self)
         p_new = p - tau * t
-        p_new = np.clip(p_new, 0.0, H)
-        Iol = (p_new <= 0) & (g < 0) & allowed
-        has_ol = np.any(Iol, axis=_AX, keepdims=True)
-        p_new = np.where(Iol, np.minimum(p_new - tau * g, H), p_new)
-        p_new = np.where(allowed, p_new, 0.0)
+        np.clip(p_new, 0.0, H if capped else None, out=p_new)
+        Iol = (p_new <= 0) & (g < 0)
+        if masked:
+            Iol &= allowed
+        has_ol = np.any(Iol, **kw)
+        if has_ol.any():
+            p_new = np.where(Iol, np.minimum(p_new - tau * g, H), p_new)
+        if masked:
+            p_new *= allowed
         if load_ctrl:
-            s = _bsum(p_new) * cell_area
-            p_new = np.where(s > 0, p_new * (W / np.where(s > 0, s, 1.0)), p_new)
-            p_new = np.minimum(p_new, H)
+            s_ = np.sum(p_new, **kw) * cell_area
+            p_new *= np.where(s_ > 0, W / np.where(s_ > 0, s_, 1.0), 1.0)
+            if capped:
+                np.minimum(p_new, H, out=p_new)
         use_beta = np.where(act, ~has_ol, use_beta)
-        p = np.where(act, p_new, p)
+        p = p_new if act.all() else np.where(act, p_new, p)
         u = apply_k(p)
     if active.any():
         worst = float(np.max(err[active]))
