@@ -8,7 +8,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import ufl
-from mpi4py import MPI
 from petsc4py import PETSc
 
 import dolfinx
@@ -94,11 +93,6 @@ def assemble_eigenstrain_load(V, material: Material, dx_region, axis=(0.0, 0.0, 
     f = dolfinx.fem.petsc.assemble_vector(L)
     f.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
     return f
-
-
-def integrate(expr, comm) -> float:
-    """Global integral of a scalar UFL form."""
-    return comm.allreduce(dolfinx.fem.assemble_scalar(dolfinx.fem.form(expr)), op=MPI.SUM)
 
 
 def von_mises_dg0(u, material: Material, eigen_scale: float = 0.0, dx_eig_marker=None, cell_tags=None):

@@ -13,8 +13,6 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-import dolfinx
-
 from fe_joint.elasticity import (Material, assemble_eigenstrain_load, assemble_mass, assemble_stiffness,
                                  vector_space)
 from fe_joint.mesh import original_node_dofs

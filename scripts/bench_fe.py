@@ -27,6 +27,7 @@ SIZES = {
     "medium": dict(lap_mesh_size=3.4, body_mesh_size=9.0, leaf_mesh_size=5.0),
     "default": dict(),
     "fine": dict(lap_mesh_size=2.0, body_mesh_size=5.0, hole_mesh_size=1.2, leaf_mesh_size=3.0),
+    "xfine": dict(lap_mesh_size=1.6, body_mesh_size=3.6, hole_mesh_size=1.0, leaf_mesh_size=2.4),
 }
 PROBE_XY = (0.0, 6.0)  # fixed point for the pressure convergence column, mm
 
@@ -47,7 +48,9 @@ def worker(size: str, cutoff: float, chunk: int) -> None:
     t = time.perf_counter()
     fe = load_resonator(ResonatorParams(**SIZES[size]), comm)
     t_mesh = time.perf_counter() - t
+    cpu0 = time.process_time()
     rm = build_reduced_model_from_fe(fe, Material(), 30000.0, 1e-3, cutoff, chunk=chunk)
+    cpu = comm.allreduce(time.process_time() - cpu0, op=MPI.SUM)  # what a quiet machine would need
     peak = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, op=MPI.SUM)
     if comm.rank == 0:
         from matplotlib.tri import LinearTriInterpolator, Triangulation
@@ -58,8 +61,11 @@ def worker(size: str, cutoff: float, chunk: int) -> None:
         xyz = rm.pair_xyz
         p_probe = float(LinearTriInterpolator(Triangulation(xyz[:, 0], xyz[:, 1], sub),
                                               rm.preload_pressure)(*PROBE_XY))
+        N, y = rm.preload_normal_force, xyz[:, 1]
+        half_asym = abs(N[y > 1e-9].sum() / N[y < -1e-9].sum() - 1)
         m = rm.metadata
-        out = dict(size=size, ranks=comm.size, dofs=m["n_dofs_full"], pairs=m["n_pairs"],
+        out = dict(cpu_s=cpu, half_asym=float(half_asym), shank_force=m["shank_force"],
+                   size=size, ranks=comm.size, dofs=m["n_dofs_full"], pairs=m["n_pairs"],
                    boundary=m["n_boundary"], modes=m["n_modes"], mesh_s=t_mesh, peak_mb=peak,
                    f_breathing=m["breathing_frequency_hz"], f_stuck=float(rm.tied_frequencies(6e4, n=8)[6]),
                    p_probe=p_probe, n_closed=m["n_closed"], n_toggled=m["n_toggled"],
@@ -128,15 +134,17 @@ def main() -> None:
             rows.append(launch(r, ["--worker", size, "--cutoff", str(a.cutoff), "--chunk", str(a.chunk)]))
             print(f"<!-- done {size} x{r}: {rows[-1]['total_s']:.1f} s -->", flush=True)
     print("| mesh | ranks | DOFs | pairs | boundary DOFs | modes | assembly s | factor s | FI modes s | "
-          "constraint modes s | preload s | full modes s | projection s | total s | peak MB (all ranks) | "
+          "constraint modes s | preload s | full modes s | projection s | total s | CPU s (all ranks) | "
+          "peak MB (all ranks) | "
           "f breathing untied Hz | f breathing stuck Hz | p(0, 6) MPa | closed pairs | max CB error |")
     print("|" + "---|" * 20)
     for o in rows:
         print(f"| {o['size']} | {o['ranks']} | {o['dofs']} | {o['pairs']} | {o['boundary']} | {o['modes']} | "
               f"{o['assembly_s']:.1f} | {o['factorization_s']:.1f} | {o['fixed_interface_modes_s']:.1f} | "
               f"{o['constraint_modes_s']:.1f} | {o['preload_s']:.1f} | {o.get('full_modes_s', 0):.1f} | "
-              f"{o['projection_s']:.1f} | {o['total_s']:.1f} | {o['peak_mb']:.0f} | {o['f_breathing']:.2f} | "
-              f"{o['f_stuck']:.2f} | {o['p_probe']:.1f} | {o['n_closed']}/{o['pairs']} | {o['max_cb_err']:.1e} |")
+              f"{o['projection_s']:.1f} | {o['total_s']:.1f} | {o['cpu_s']:.1f} | {o['peak_mb']:.0f} | {o['f_breathing']:.2f} | "
+              f"{o['f_stuck']:.2f} | {o['p_probe']:.1f} | {o['n_closed']}/{o['pairs']} | {o['max_cb_err']:.1e} | "
+              f"{o['shank_force']:.0f} | {o['half_asym']:.1e} |")
     if a.degree_study:
         drows = [launch(1, ["--worker", s, "--degree-worker", str(d)]) for s in a.degree_sizes for d in (1, 2)]
         ref = max((o for o in drows if o["degree"] == 2), key=lambda o: o["dofs"])
