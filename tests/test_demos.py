@@ -46,3 +46,9 @@ def test_demo_friction_hbm_matches_describing_function() -> None:
     # the exact integration is matched better with more harmonics
     errs = [float(x) for x in re.findall(r"error vs exact ([0-9.e+-]+)", out)]
     assert len(errs) == 3 and errs[2] < errs[0]
+
+
+def test_demo_multiscale_coupling_reproduces_fe_pressure() -> None:
+    err, out = _result("demo_multiscale.py")
+    assert err <= 1e-6
+    assert "k_t,eq: Mindlin" in out
