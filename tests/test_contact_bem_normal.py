@@ -65,6 +65,9 @@ def test_westergaard_partial_contact_width():
         g, ns, ps = _westergaard(r)
         width = ns.contact[:, 0].sum() * g.dx
         assert width == pytest.approx(ref.westergaard_contact_width(r * ps, 1e-3, 1.0, ES), rel=0.01)
+        # pressure profile (sqrt edges are the worst resolved cells)
+        pr = ref.westergaard_pressure(g.x - g.x[0], r * ps, 1e-3, 1.0, ES)
+        assert np.abs(ns.pressure[:, 0] - pr).max() < 0.03 * ps
 
 
 def test_westergaard_full_contact_pressure():
