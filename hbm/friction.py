@@ -258,7 +258,8 @@ class FrictionContacts:
             err = np.max(dev) if k else 0.0
             if err <= self.close_tol:
                 break
-            if newton:
+            if newton and cycle >= 2:
+                # (after the plain second cycle: 1D stick-slip and transients are closed by then)
                 w_new = _newton_restart(w_start, w, _cycle_matrix(closed, slip, rho, that),
                                         dev > self.close_tol)
                 jumped |= np.any(w_new != w, axis=1)
@@ -320,7 +321,7 @@ class FrictionContacts:
                 # Newton restart on the slider fixed point w = Phi(w), Phi' = P (see _newton_restart)
                 m11, m12, m21, m22 = 1 - p11, -p12, -p21, 1 - p22
                 det = m11 * m22 - m12 * m21
-                if newton and abs(det) > NEWTON_DET:
+                if newton and cycle >= 2 and abs(det) > NEWTON_DET:
                     jumped[e] = True
                     d1, d2 = w1 - s1, w2 - s2
                     w1 = s1 + (m22 * d1 - m12 * d2) / det
@@ -359,16 +360,17 @@ class FrictionContacts:
             active = np.nonzero(~stick.all(axis=0))[0]                       # samples where dw may change
             return A, cn, S, active
 
-        def src(S, j):
-            return (S[:, j, :, :, None] * E[j]).reshape(k, 2, nx)
+        def sources(S):
+            return (S[..., None] * E[None, :, None, None, :]).reshape(S.shape[0], nt, 2, nx)
 
         # final cycle with dw_0 = 0: particular part d_j and homogeneous part Phi_j
         A, cn, S, active = cycle_ops(*rec[-1])
+        SE = sources(S)
         d = np.zeros((k, 2, nx))
         Ph = np.broadcast_to(eye, (k, 2, 2)).copy()
         snaps_d, snaps_P = [d], [Ph]
         for j in active:
-            d = A[:, j] @ d + src(S, j)
+            d = A[:, j] @ d + SE[:, j]
             Ph = A[:, j] @ Ph
             snaps_d.append(d)
             snaps_P.append(Ph)
@@ -378,13 +380,16 @@ class FrictionContacts:
         dw0 = np.zeros((k, 2, nx))
         if fixed.any():
             dw0[fixed] = np.linalg.solve(Mfix[fixed], d[fixed])
-        if (~fixed).any() and len(rec) > 1:
-            dwh = np.zeros((k, 2, nx))
+        neutral = np.nonzero(~fixed)[0]
+        if neutral.size and len(rec) > 1:
+            # history from rest, only for the neutral elements
+            dwh = np.zeros((neutral.size, 2, nx))
             for cyc in rec[:-1]:
                 Ac, _, Sc, act = cycle_ops(*cyc)
+                Ac, SEc = Ac[neutral], sources(Sc[neutral])
                 for j in act:
-                    dwh = Ac[:, j] @ dwh + src(Sc, j)
-            dw0[~fixed] = dwh[~fixed]
+                    dwh = Ac[:, j] @ dwh + SEc[:, j]
+            dw0[neutral] = dwh
         # dw seen at sample j = after the updates of the active samples before j
         which = np.searchsorted(active, np.arange(nt), side="left")
         dws = (np.stack(snaps_P, axis=1)[:, which] @ dw0[:, None]
@@ -455,9 +460,9 @@ class FrictionContacts:
                 dT, dN = res[5], res[6]
                 D = fourier.D
                 blk = np.empty((marched.size, 3 * nH, 3 * nH))
-                blk[:, 0:nH] = np.einsum("hj,kjx->khx", D, dT[:, 0])
-                blk[:, nH:2 * nH] = np.einsum("hj,kjx->khx", D, dT[:, 1])
-                blk[:, 2 * nH:] = np.einsum("hj,kjx->khx", D, dN)
+                blk[:, 0:nH] = D @ dT[:, 0]
+                blk[:, nH:2 * nH] = D @ dT[:, 1]
+                blk[:, 2 * nH:] = D @ dN
                 DF[pos[marched]] = blk
         return F, nl, DF
 

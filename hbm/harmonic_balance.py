@@ -179,20 +179,21 @@ class HarmonicBalance:
 
         transpose=True applies the transpose of the real harmonic-block operator (G is complex
         symmetric, so that is the block operator of conj(G))."""
-        out = np.empty_like(g)
-        out[0] = self.G.apply(0, omega, g[0].astype(complex)).real
-        cpl = (g[1::2] - 1j * g[2::2]).T                       # (nc, H)
-        Psi = self.G.Psi
-        PtC = Psi.T @ cpl                                      # (m, H)
-        mod = np.empty_like(PtC)
-        for h in range(1, self.H + 1):
-            L = self.G.modal(h, omega)
+        G = self.G
+        # static residual flexibility is real and the same for every harmonic: one real product
+        out = (G.R @ g.T).T
+        cpl = np.concatenate([g[:1], g[1::2] - 1j * g[2::2]]).T          # (nc, H+1)
+        PtC = G.Psi.T @ cpl                                               # (m, H+1)
+        for h in range(self.H + 1):
+            L = G.modal(h, omega)
             if transpose:
                 L = L.conj()
-            mod[:, h - 1] = L * PtC[:, h - 1] if L.ndim == 1 else L @ PtC[:, h - 1]
-        u = Psi @ mod + self.G.R @ cpl
+            PtC[:, h] = L * PtC[:, h] if L.ndim == 1 else L @ PtC[:, h]
+        u = G.Psi @ PtC
+        out[0] += u[:, 0].real
         # transposed blocks [[a, -b], [b, a]] act as conj(G) = a - i b on c = x - i y
-        out[1::2], out[2::2] = u.real.T, -u.imag.T
+        out[1::2] += u[:, 1:].real.T
+        out[2::2] -= u[:, 1:].imag.T
         return out
 
     # ------------------------------------------------------------------ residual
@@ -253,7 +254,7 @@ class HarmonicBalance:
         if P <= self.dense_limit:
             Gb = self._gbig(omega, cn)
             J = np.eye(P)
-            J[:, idx] += np.einsum("pkx,kxy->pky", Gb[:, idx], Dg)
+            J[:, idx] += (Gb[:, idx].transpose(1, 0, 2) @ Dg).transpose(1, 0, 2)
             return cn, idx, (lambda x: J @ x), J, None
         matvec, prec = self._gmres_ops(omega, nl, cn, idx, Dg)
         return cn, idx, matvec, None, prec
@@ -358,16 +359,16 @@ class HarmonicBalance:
         Ls = [G.modal(h, omega) for h in range(self.H + 1)]
 
         def gapply_red(v):                                    # v (nH, p) real
-            out = np.empty_like(v)
-            L0 = Ls[0]
-            out[0] = (Psi @ ((L0 * (Psi.T @ v[0])) if L0.ndim == 1 else L0 @ (Psi.T @ v[0]))).real + R @ v[0]
-            cpl = v[1::2] - 1j * v[2::2]
-            PtC = Psi.T @ cpl.T
-            for h in range(1, self.H + 1):
+            out = (R @ v.T).T
+            cpl = np.concatenate([v[:1], v[1::2] - 1j * v[2::2]]).T
+            PtC = Psi.T @ cpl
+            for h in range(self.H + 1):
                 L = Ls[h]
-                PtC[:, h - 1] = L * PtC[:, h - 1] if L.ndim == 1 else L @ PtC[:, h - 1]
-            u = Psi @ PtC + R @ cpl.T
-            out[1::2], out[2::2] = u.real.T, -u.imag.T
+                PtC[:, h] = L * PtC[:, h] if L.ndim == 1 else L @ PtC[:, h]
+            u = Psi @ PtC
+            out[0] += u[:, 0].real
+            out[1::2] += u[:, 1:].real.T
+            out[2::2] -= u[:, 1:].imag.T
             return out
 
         def matvec(x):
@@ -456,10 +457,17 @@ class HarmonicBalance:
         y = -(self.B.T @ g.T).T                                 # (nH, n) forces on the structure
         y[1] += force
         q = np.zeros((self.nH, self.s.n))
-        q[0] = self.G.response_full(0, omega, y[0].astype(complex)).real
-        for h in range(1, self.H + 1):
-            z = self.G.response_full(h, omega, y[2 * h - 1] - 1j * y[2 * h])
-            q[2 * h - 1], q[2 * h] = z.real, -z.imag
+        G = self.G
+        yc = np.concatenate([y[:1], y[1::2] - 1j * y[2::2]]).T          # (n, H+1) complex
+        PtY = G.Phi.T @ yc
+        for h in range(self.H + 1):
+            L = G.modal(h, omega)
+            PtY[:, h] = L * PtY[:, h] if L.ndim == 1 else L @ PtY[:, h]
+        z = G.Phi @ PtY
+        if not G.complete:
+            z = z + G.residual_full(yc.real) + 1j * G.residual_full(yc.imag)
+        q[0] = z[:, 0].real
+        q[1::2], q[2::2] = z[:, 1:].real.T, -z[:, 1:].imag.T
         sol = Solution(omega, q, self._to_el(U).copy(), res, it, nnl)
         sol._jac = jac
         return sol

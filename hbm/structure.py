@@ -167,7 +167,7 @@ class Receptance:
             return np.zeros_like(y)
         rigid, el = self.rigid, ~self.rigid
         Phi = self.Phi
-        x = sla.cho_solve(self._chol, y)
+        x = sla.cho_solve(self._chol, y, check_finite=False)
         x = x - Phi[:, rigid] @ (Phi[:, rigid].T @ y) / self.sigma
         x = x - Phi[:, el] @ ((Phi[:, el].T @ y) / (self.lam[el][:, None] if y.ndim == 2 else self.lam[el]))
         return x
