@@ -58,10 +58,27 @@ class BoundaryCondensation:
             self.MBB = M.createSubMatrix(self.isB, self.isB)
         for A in (self.KII,) + ((self.MII,) if M is not None else ()):
             A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        self.ksp = mumps_cholesky(PETSc.KSP().create(self.comm))
-        self.ksp.setOperators(self.KII)
-        self.ksp.setUp()
-        self.factor = self.ksp.getPC().getFactorMatrix()
+        self._ksp = None  # factorized lazily: the fixed-interface eigen solve runs first with its own
+
+    @property
+    def ksp(self) -> PETSc.KSP:
+        """MUMPS Cholesky solver of K_II (factorized on first use)."""
+        if self._ksp is None:
+            self._ksp = mumps_cholesky(PETSc.KSP().create(self.comm))
+            self._ksp.setOperators(self.KII)
+            self._ksp.setUp()
+        return self._ksp
+
+    @property
+    def factor(self) -> PETSc.Mat:
+        """The factored K_II."""
+        return self.ksp.getPC().getFactorMatrix()
+
+    def release_factor(self) -> None:
+        """Free the factorization (the condensed blocks stay available)."""
+        if self._ksp is not None:
+            self._ksp.destroy()
+            self._ksp = None
 
     # ---- helpers -------------------------------------------------------------------------
     def _gather_b_rows(self, local: np.ndarray) -> np.ndarray:
@@ -94,17 +111,24 @@ class BoundaryCondensation:
         return X
 
     # ---- condensation --------------------------------------------------------------------
-    def condense(self, modes_interior: list | None = None, chunk: int = 256) -> dict:
+    def auto_chunk(self, budget_mb: float = 1000.0, max_chunk: int = 256) -> int:
+        """Chunk size keeping the ~5 dense (n_I x chunk) work blocks within ``budget_mb`` per run."""
+        n_i = self.KII.getSize()[0]
+        return int(max(16, min(max_chunk, budget_mb * 1e6 / (5 * 8 * max(n_i, 1)))))
+
+    def condense(self, modes_interior: list | None = None, chunk: int | None = None) -> dict:
         """Reduced boundary blocks, computed chunk by chunk.
 
         Args:
             modes_interior: fixed-interface modes (PETSc Vecs on the interior layout) or None.
-            chunk: boundary columns per block (memory ~ 4 * n_I * chunk * 8 bytes).
+            chunk: boundary columns per block (memory ~ 5 * n_I * chunk * 8 bytes); None: auto
+                (:meth:`auto_chunk`, <= 256 columns and ~1 GB).
 
         Returns:
             dict with ``K_BB`` (n_B, n_B) N/mm, and if M was given ``M_BB`` (n_B, n_B) t and
             ``M_PB`` (n_modes, n_B) t (coupling of modal and boundary coordinates).
         """
+        chunk = self.auto_chunk() if chunk is None else chunk
         if chunk < 1:
             raise ValueError(f"chunk must be >= 1, got {chunk}")
         nb = self.n_b
@@ -194,7 +218,7 @@ class BoundaryCondensation:
 
     def destroy(self):
         """Free the factorization and sub-matrices."""
-        self.ksp.destroy()
+        self.release_factor()
         for name in ("KII", "KIB", "KBI", "KBB", "MII", "MIB", "MBI", "MBB"):
             if hasattr(self, name):
                 getattr(self, name).destroy()
