@@ -260,8 +260,10 @@ class FrictionContacts:
                 break
             if newton and cycle >= 2:
                 # (after the plain second cycle: 1D stick-slip and transients are closed by then)
-                w_new = _newton_restart(w_start, w, _cycle_matrix(closed, slip, rho, that),
-                                        dev > self.close_tol)
+                act = dev > self.close_tol
+                P = np.broadcast_to(np.eye(2), (k, 2, 2)).copy()
+                P[act] = _cycle_matrix(closed[act], slip[act], rho[act], that[act])
+                w_new = _newton_restart(w_start, w, P, act)
                 jumped |= np.any(w_new != w, axis=1)
                 w = w_new
         return cycle, err, rec, jumped

@@ -46,29 +46,47 @@ from .friction import FrictionContacts
 from .structure import LinearStructure, Receptance
 
 
-@dataclass
 class Solution:
     """A periodic solution at one frequency.
 
     Attributes:
         omega: excitation frequency, rad/s.
-        coefficients: (2H+1, n) displacement harmonics of every DOF, mm ([a0, a1, b1, ...]).
+        coefficients: (2H+1, n) displacement harmonics of every DOF, mm ([a0, a1, b1, ...]);
+            recovered from the contact harmonics on first access (cached).
         contact: (ne, 3, 2H+1) harmonics of the element relative displacements (t1, t2, n), mm.
         residual: relative residual norm reached.
         iterations: Newton iterations used.
         n_nonlinear: number of elements that slip or separate somewhere in the cycle.
     """
 
-    omega: float
-    coefficients: np.ndarray
-    contact: np.ndarray
-    residual: float
-    iterations: int
-    n_nonlinear: int
+    def __init__(self, omega: float, coefficients, contact: np.ndarray, residual: float,
+                 iterations: int, n_nonlinear: int, recover=None) -> None:
+        self.omega = float(omega)
+        self._coefficients = None if coefficients is None else np.asarray(coefficients)
+        self.contact = contact
+        self.residual = residual
+        self.iterations = iterations
+        self.n_nonlinear = n_nonlinear
+        self._recover = recover            # (hb, y) to recover structure DOFs lazily
+        self._jac = None
+
+    @property
+    def coefficients(self) -> np.ndarray:
+        if self._coefficients is None:
+            hb, y = self._recover
+            self._coefficients = hb._recover_dofs(self.omega, y, None)
+        return self._coefficients
+
+    def dof_coefficients(self, dof: int) -> np.ndarray:
+        """Harmonics (2H+1,) of one DOF (cheap: does not recover the whole structure)."""
+        if self._coefficients is not None:
+            return self._coefficients[:, dof]
+        hb, y = self._recover
+        return hb._recover_dofs(self.omega, y, dof)
 
     def amplitude(self, dof: int, harmonic: int = 1) -> float:
         """Amplitude sqrt(a_h^2 + b_h^2) of harmonic ``harmonic`` (default the first) at ``dof``, mm."""
-        X = self.coefficients[:, dof]
+        X = self.dof_coefficients(dof)
         if harmonic == 0:
             return float(abs(X[0]))
         return float(np.hypot(X[2 * harmonic - 1], X[2 * harmonic]))
@@ -450,27 +468,38 @@ class HarmonicBalance:
 
     def make_solution(self, omega: float, force: np.ndarray, U: np.ndarray, res: float,
                       it: int, nnl: int, g: np.ndarray | None = None, jac=None) -> Solution:
-        """Recover all structure DOFs from the contact harmonics (g: correction forces if known)."""
+        """Solution object; structure DOFs are recovered from the contact harmonics on demand."""
         if g is None:
             F, _, _ = self.c.evaluate(self._to_el(U), self.fourier, jacobian=False)
             g = self._from_el(F) - self.k0[None, :] * U
         y = -(self.B.T @ g.T).T                                 # (nH, n) forces on the structure
         y[1] += force
-        q = np.zeros((self.nH, self.s.n))
+        sol = Solution(omega, None, self._to_el(U).copy(), res, it, nnl, recover=(self, y))
+        sol._jac = jac
+        return sol
+
+    def _recover_dofs(self, omega: float, y: np.ndarray, dof: int | None) -> np.ndarray:
+        """Displacement harmonics q_h = H(h w) y_h of all DOFs (dof None) or of one DOF."""
         G = self.G
         yc = np.concatenate([y[:1], y[1::2] - 1j * y[2::2]]).T          # (n, H+1) complex
         PtY = G.Phi.T @ yc
         for h in range(self.H + 1):
             L = G.modal(h, omega)
             PtY[:, h] = L * PtY[:, h] if L.ndim == 1 else L @ PtY[:, h]
-        z = G.Phi @ PtY
-        if not G.complete:
-            z = z + G.residual_full(yc.real) + 1j * G.residual_full(yc.imag)
-        q[0] = z[:, 0].real
-        q[1::2], q[2::2] = z[:, 1:].real.T, -z[:, 1:].imag.T
-        sol = Solution(omega, q, self._to_el(U).copy(), res, it, nnl)
-        sol._jac = jac
-        return sol
+        if dof is None:
+            z = G.Phi @ PtY
+            if not G.complete:
+                r = G.residual_full(np.concatenate([yc.real, yc.imag], axis=1))
+                z = z + r[:, :self.H + 1] + 1j * r[:, self.H + 1:]
+        else:
+            z = G.Phi[dof] @ PtY
+            if not G.complete:
+                z = z + G.residual_row(dof) @ yc
+        q = np.zeros((self.nH,) + z.shape[:-1])
+        q[0] = z[..., 0].real
+        q[1::2] = np.moveaxis(z[..., 1:].real, -1, 0)
+        q[2::2] = -np.moveaxis(z[..., 1:].imag, -1, 0)
+        return q
 
     def solve(self, omega: float, force, guess: Solution | None = None) -> Solution:
         """Periodic response to force·cos(omega t).

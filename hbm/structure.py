@@ -172,6 +172,15 @@ class Receptance:
         x = x - Phi[:, el] @ ((Phi[:, el].T @ y) / (self.lam[el][:, None] if y.ndim == 2 else self.lam[el]))
         return x
 
+    def residual_row(self, dof: int) -> np.ndarray:
+        """Row ``dof`` of the static residual flexibility (n,), cached (one solve per DOF)."""
+        rows = self.__dict__.setdefault("_rows", {})
+        if dof not in rows:
+            e = np.zeros(self.s.n)
+            e[dof] = 1.0
+            rows[dof] = self.residual_full(e)          # symmetric: column = row
+        return rows[dof]
+
     def response_full(self, h: int, omega: float, y: np.ndarray) -> np.ndarray:
         """Structure displacement harmonic q_h = H_h y for complex forces y (n,)."""
         L = self.modal(h, omega)
