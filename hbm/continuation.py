@@ -1,11 +1,19 @@
 """Pseudo-arc-length continuation of harmonic-balance solutions in the frequency.
 
-Scaled unknowns Y = (U / u_s, w / w_s) (u_s: norm of the first solution, w_s: the start
-frequency). Tangent predictor from dU/dw = -J^-1 dR/dw, corrector on
-{R(U, w) = 0, t . (Y - Y_pred) = 0} solved by bordering with the reduced Newton solve (the same
-two right-hand sides share one factorization). Step length adapts to the corrector's iteration
-count; a failed corrector halves the step. Turning points are where the w-component of the
-tangent changes sign; they are recorded in ``FRFResult.turning_points``.
+* Scaled unknowns Y = (U / u_s, w / w_s): w_s is the start frequency, u_s the geometric mean of the
+  start response and the linear-base peak over the range.
+* Tangent predictor: null vector of [J, dR/dw] from the bordered system with the previous tangent
+  as last row, oriented so that the sign of the bordered determinant stays constant along the
+  branch (dense path; the GMRES path keeps t . t_prev > 0).
+* Corrector: damped Newton on {R(U, w) = 0, t . (Y - Y_pred) = 0}; the bordered system is solved
+  directly (reduced on the nonlinear elements), so it stays regular at turning points.
+* Corner folds: with sampled piecewise-linear contact laws a turning point generically sits where
+  one time sample switches state (a corner of the branch). When no point exists on the hyperplane
+  ahead, the tangent of the piece beyond the corner is taken at the predictor, oriented by the
+  determinant sign, and the corrector restarts from the corner along it.
+* Step length grows x1.5 after <= 3 corrector iterations, shrinks x0.7 after >= 7, halves on failure;
+  ``ConvergenceError`` below ds_min. Turning points (sign changes of the w-component of the tangent)
+  are listed in ``FRFResult.turning_points``.
 """
 from __future__ import annotations
 
@@ -17,8 +25,6 @@ import numpy as np
 from .errors import ConvergenceError
 from . import stability as stab
 
-DEBUG = False
-DEBUG_STATE = []
 
 
 @dataclass
@@ -116,25 +122,21 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
             t = -t
         return t, sign
 
-    def corrector(Yp, t, moore_penrose):
-        """Newton on {R = 0, t.(Y - Yp) = 0}; Moore-Penrose variant: t follows the local tangent."""
+    def corrector(Yp, t):
+        """Damped Newton on {R = 0, t.(Y - Yp) = 0} from the predictor Yp."""
         Uc, wc = Yp[:-1].reshape(shape) * us, Yp[-1] * ws
         ev = evaluate(Uc, wc)
         step = np.inf
-        tk = t.copy()
+        tk = t
         for it in range(1, max_corrector + 1):
             R, g, nl, Dg, scale = ev
             r = np.linalg.norm(R)
             if it > 1 and hb.converged(r, scale, step):
                 return True, Uc, wc, ev, it
             Rw = hb.r_omega(wc, force, g)
-            cval = 0.0 if moore_penrose else tk @ (Y_of(Uc, wc) - Yp)
-            rhs = [(R, cval)] + ([(np.zeros(shape), -1.0)] if moore_penrose else [])
-            sols_, _ = hb.linsolve_aug(wc, nl, Dg, Rw, tk[:-1].reshape(shape) / us, tk[-1] / ws, rhs)
-            dU, dw = sols_[0]
-            if moore_penrose:
-                tn = np.concatenate([sols_[1][0].ravel() / us, [sols_[1][1] / ws]])
-                tk = tn / np.linalg.norm(tn)
+            cval = tk @ (Y_of(Uc, wc) - Yp)
+            [(dU, dw)], _ = hb.linsolve_aug(wc, nl, Dg, Rw, tk[:-1].reshape(shape) / us, tk[-1] / ws,
+                                            [(R, cval)])
             # damped step: halve while the residual does not decrease
             alpha = 1.0
             for _ in range(6):
@@ -148,9 +150,6 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
                 return False, Uc, wc, ev, it
             step = max(np.linalg.norm(alpha * dU), abs(alpha * dw) / ws * scale)
             Uc, wc, ev = Ut, wt, evt
-            if DEBUG:
-                print("corr", it, wc, np.linalg.norm(ev[0]) / ev[4], moore_penrose)
-                DEBUG_STATE.append((Uc.copy(), wc))
         return False, Uc, wc, ev, max_corrector
 
     ev0 = evaluate(U, w0)
@@ -167,7 +166,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         Y = Y_of(U, w)
         while True:
             Yp = Y + ds * t
-            ok, Uc, wc, ev, it = corrector(Yp, t, False)
+            ok, Uc, wc, ev, it = corrector(Yp, t)
             total_it += it
             if ok:
                 break
@@ -179,7 +178,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
             if ref_sign is not None:
                 tb, _ = tangent(Yp[:-1].reshape(shape) * us, Yp[-1] * ws, evp, t, ref_sign)
                 Yc = Y_of(Uc, wc)
-                ok, Uc, wc, ev, it = corrector(Yc + ds * tb, tb, False)
+                ok, Uc, wc, ev, it = corrector(Yc + ds * tb, tb)
                 total_it += it
                 if ok and np.linalg.norm(Y_of(Uc, wc) - Y) > 1e-3 * ds:
                     break

@@ -21,8 +21,6 @@ including the cycles before closure, so it is the exact derivative of the comput
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
 
 import numpy as np
@@ -83,6 +81,25 @@ def _newton_restart(w_start, w_end, P, active):
         d = (w_end - w_start)[ok]
         w[ok] = w_start[ok] + np.linalg.solve(M[ok], d[:, :, None])[:, :, 0]
     return w
+
+
+#: up to this many marched elements the Jacobian recurrence uses a prefix scan
+SCAN_LIMIT = 16
+
+
+def _affine_scan(A, B):
+    """Inclusive prefix composition of x_{i+1} = A_i x_i + B_i along axis 1 (Hillis–Steele).
+
+    Returns (P, D) with x_{i+1} = P_i x_0 + D_i."""
+    P, D = A.copy(), B.copy()
+    n = A.shape[1]
+    step = 1
+    while step < n:
+        Pn = P[:, step:] @ P[:, :-step]
+        Dn = P[:, step:] @ D[:, :-step] + D[:, step:]
+        P[:, step:], D[:, step:] = Pn, Dn
+        step *= 2
+    return P, D
 
 
 class FrictionContacts:
@@ -370,12 +387,20 @@ class FrictionContacts:
         SE = sources(S)
         d = np.zeros((k, 2, nx))
         Ph = np.broadcast_to(eye, (k, 2, 2)).copy()
-        snaps_d, snaps_P = [d], [Ph]
-        for j in active:
-            d = A[:, j] @ d + SE[:, j]
-            Ph = A[:, j] @ Ph
-            snaps_d.append(d)
-            snaps_P.append(Ph)
+        if k <= SCAN_LIMIT and active.size:
+            # few elements: prefix scan of the affine maps (log2(n) vectorized steps instead of
+            # one small step per sample)
+            Pc, Dc = _affine_scan(A[:, active], SE[:, active])
+            snaps_P = [Ph] + [Pc[:, i] for i in range(active.size)]
+            snaps_d = [d] + [Dc[:, i] for i in range(active.size)]
+            Ph, d = Pc[:, -1], Dc[:, -1]
+        else:
+            snaps_d, snaps_P = [d], [Ph]
+            for j in active:
+                d = A[:, j] @ d + SE[:, j]
+                Ph = A[:, j] @ Ph
+                snaps_d.append(d)
+                snaps_P.append(Ph)
         Mfix = eye - Ph
         det = Mfix[:, 0, 0] * Mfix[:, 1, 1] - Mfix[:, 0, 1] * Mfix[:, 1, 0]
         fixed = np.abs(det) > NEWTON_DET
