@@ -110,6 +110,27 @@ class BoundaryCondensation:
         self.factor.matSolve(B, X)
         return X
 
+    def _solve_coupling(self, cols: np.ndarray, E: PETSc.Mat) -> PETSc.Mat:
+        """K_II^{-1} K_IB[:, cols] as a dense block.
+
+        Serially the right-hand side goes to MUMPS as a sparse matrix (a transpose view of the
+        K_BI rows; MUMPS prunes the forward elimination, measured 2x faster); MUMPS rejects a
+        sparse RHS in parallel, so there it is the dense product K_IB E.
+        """
+        if self.mpi.size == 1:
+            rows = PETSc.IS().createGeneral(self.isB.getIndices()[cols].astype(PETSc.IntType), comm=self.comm)
+            Bt = self.K.createSubMatrix(rows, self.isI)
+            T = PETSc.Mat().createTranspose(Bt)
+            P = self._dense(self.n_i_local, self.KII.getSize()[0], len(cols))
+            self.factor.matSolve(T, P)
+            for A in (T, Bt, rows):
+                A.destroy()
+            return P
+        R = self.KIB.matMult(E)
+        P = self.solve_interior(R)
+        R.destroy()
+        return P
+
     # ---- condensation --------------------------------------------------------------------
     def auto_chunk(self, budget_mb: float = 1000.0, max_chunk: int = 256) -> int:
         """Chunk size keeping the ~5 dense (n_I x chunk) work blocks within ``budget_mb`` per run."""
@@ -142,12 +163,11 @@ class BoundaryCondensation:
         for start in range(0, nb, chunk):
             cols = np.arange(start, min(start + chunk, nb))
             E = self._selection(cols)
-            R = self.KIB.matMult(E)                  # K_IB E
-            P = self.solve_interior(R)               # = -Psi chunk
+            P = self._solve_coupling(cols, E)        # K_II^{-1} K_IB E = -Psi chunk
             S = self.KBB.matMult(E)
             T = self.KBI.matMult(P)
             KBBr[:, cols] = self._gather_b_rows(S.getDenseArray() - T.getDenseArray())
-            S.destroy(); T.destroy(); R.destroy()
+            S.destroy(); T.destroy()
             if with_mass:
                 X = self.MIB.matMult(E)
                 MP = self.MII.matMult(P)
