@@ -133,6 +133,7 @@ class FrictionContacts:
         self.dofs = d.astype(np.int64)
         self.ne = d.shape[0]
         ne = self.ne
+        # (elements without stiffness carry no force: drop them before building the contacts)
         self.kt = _param("kt", kt, ne, 0.0, allow_equal=False)
         self.kn = _param("kn", kn, ne, 0.0, allow_equal=False)
         self.mu = _param("mu", mu, ne, 0.0)

@@ -27,8 +27,9 @@ def _check_square(name: str, A, n: int | None) -> np.ndarray:
         raise ValueError(f"{name} must be a {want} matrix, got shape {A.shape}")
     if not np.all(np.isfinite(A)):
         raise ValueError(f"{name} must be finite (no NaN/inf)")
-    if not np.allclose(A, A.T, rtol=1e-10, atol=1e-12 * max(np.abs(A).max(), 1e-300)):
-        raise ValueError(f"{name} must be symmetric")
+    # reduced models (Phi^T K Phi) are symmetric to round-off only: allow 1e-8 of the largest entry
+    if np.abs(A - A.T).max() > 1e-8 * max(np.abs(A).max(), 1e-300):
+        raise ValueError(f"{name} must be symmetric (|A - A^T| <= 1e-8 max|A|)")
     return 0.5 * (A + A.T)
 
 
