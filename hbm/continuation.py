@@ -1,7 +1,8 @@
 """Pseudo-arc-length continuation of harmonic-balance solutions in the frequency.
 
-* Scaled unknowns Y = (U / u_s, w / w_s): w_s is the start frequency, u_s the geometric mean of the
-  start response and the linear-base peak over the range.
+* Scaled unknowns Y = (U / u_s, w / w_s): w_s is the start frequency, u_s the norm of the current
+  solution (updated every step, so steps are relative changes), and the frequency step is capped
+  at ``max_domega`` (default range/100) so that flat parts cannot step over a narrow peak.
 * Tangent predictor: null vector of [J, dR/dw] from the bordered system with the previous tangent
   as last row, oriented so that the sign of the bordered determinant stays constant along the
   branch (dense path; the GMRES path keeps t . t_prev > 0).
@@ -55,7 +56,8 @@ class FRFResult:
 def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
                  max_points: int = 1000, ds: float | None = None, ds_max: float | None = None,
                  ds_min: float | None = None, max_corrector: int = 12,
-                 stability: str = "auto") -> FRFResult:
+                 stability: str = "auto", max_domega: float | None = None,
+                 max_damp: float = 0.1) -> FRFResult:
     """Continue the periodic response from omega_start to omega_end (rad/s).
 
     Args:
@@ -64,10 +66,15 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         force: (n,) amplitude of force·cos(wt), N.
         dof: response DOF for ``amplitude``.
         max_points: stop after this many points.
-        ds: initial arc-length step in scaled units (default |Δw|/w_s/100).
-        ds_max, ds_min: step bounds (default 25 ds, 1e-6 ds).
+        ds: initial arc-length step in scaled units (relative change of the response and of the
+            frequency; default 0.02).
+        ds_max, ds_min: step bounds (default 0.1, 1e-6 ds).
         max_corrector: corrector iterations before a step is retried shorter.
         stability: "auto" (Hill if small enough, else fold parity), "hill", "fold", "none".
+        max_domega: largest frequency change per step, rad/s (default |Δw|/100): keeps the
+            predictor from stepping over a lightly damped peak where the branch is flat.
+        max_damp: largest relative change of the response amplitude per step (a step is halved
+            otherwise), so the response DOF's peak is resolved even in a mode the contacts hardly see.
 
     Returns:
         FRFResult. Raises ConvergenceError if the step falls below ds_min.
@@ -85,19 +92,19 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
     direction = np.sign(w1 - w0)
     ws = w0
     if ds is None:
-        ds = abs(w1 - w0) / ws / 100.0
-    ds_max = 25 * ds if ds_max is None else ds_max
+        ds = 0.02
+    ds_max = 0.1 if ds_max is None else ds_max
     ds_min = 1e-6 * ds if ds_min is None else ds_min
+    max_domega = abs(w1 - w0) / 100.0 if max_domega is None else float(max_domega)
+    if not max_domega > 0:
+        raise ValueError(f"max_domega must be > 0 rad/s, got {max_domega!r}")
 
     sol = hb.solve(w0, force)
     U = hb._from_el(sol.contact)
-    # amplitude scale: geometric mean of the start response and the linear-base peak over the
-    # range, so that neither the far-from-resonance start nor a lightly damped linear peak
-    # dictates the arc length
-    lin_peak = max(np.linalg.norm(hb.ulin(w_, force)) for w_ in np.linspace(min(w0, w1), max(w0, w1), 64))
-    us = np.sqrt(max(np.linalg.norm(U), 1e-300) * max(lin_peak, 1e-300))
-    if not np.isfinite(us) or np.linalg.norm(U) == 0:
-        us = 1.0
+    # amplitude scale: the norm of the current solution, updated at every step, so that the
+    # arc length measures *relative* changes of the response (a friction-limited peak far below
+    # the linear one is resolved as well as a linear one)
+    us = np.linalg.norm(U) if np.linalg.norm(U) > 0 else 1.0
     total_it = sol.iterations
     shape = U.shape
 
@@ -161,15 +168,32 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         ref_sign = -ref_sign
     keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
     sols, taus = [sol], [t[-1]]
+    amp_prev = sol.amplitude(dof)
     w = w0
     while len(sols) < max_points:
+        nu = np.linalg.norm(U)
+        if nu > 0 and nu != us:
+            # rescale the tangent to the new amplitude scale
+            tu = np.concatenate([t[:-1] * (us / nu), t[-1:]])
+            t = tu / np.linalg.norm(tu)
+            us = nu
         Y = Y_of(U, w)
         while True:
+            # the frequency step is capped at max_domega
+            ds = min(ds, max_domega / (abs(t[-1]) * ws)) if t[-1] != 0 else ds
             Yp = Y + ds * t
             ok, Uc, wc, ev, it = corrector(Yp, t)
             total_it += it
             if ok:
-                break
+                # the arc length lives on the contact unknowns; the response DOF may resonate in a
+                # mode the contacts hardly see, so also bound its relative change per step
+                R_, g_, _, _, _ = ev
+                cand = hb.make_solution(wc, force, Uc, 0.0, it, 0, g=g_)
+                a_new = cand.amplitude(dof)
+                if abs(a_new - amp_prev) <= max_damp * max(a_new, amp_prev) or ds <= 4 * ds_min:
+                    break
+                ds *= 0.5
+                continue
             # Corner fold of the piecewise-linear contact laws: the branch turns back exactly where
             # a time sample switches state, so no point exists on the hyperplane ahead. Take the
             # tangent of the piece beyond the corner (Jacobian at the predictor), orient it by the
@@ -191,6 +215,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         R, g, nl, Dg, scale = ev
         sols.append(hb.make_solution(w, force, U, float(np.linalg.norm(R) / scale), it, nl.size,
                                      g=g, jac=(nl, Dg) if keep_jac else None))
+        amp_prev = sols[-1].amplitude(dof)
         taus.append(t[-1])
         if it <= 3:
             ds = min(ds * 1.5, ds_max)
