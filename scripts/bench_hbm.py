@@ -144,7 +144,8 @@ def bench_scaling(elements, n, force, ds_max):
         setup = time.perf_counter() - t
         w1 = np.sqrt(hb.G.lam[0])
         t = time.perf_counter()
-        frf = hb.frf(0.8 * w1, 1.1 * w1, force * f, dof=0, ds_max=ds_max, max_points=2000)
+        kw = {} if ds_max is None else {"ds_max": ds_max}
+        frf = hb.frf(0.8 * w1, 1.1 * w1, force * f, dof=0, max_points=2000, **kw)
         dt = time.perf_counter() - t
         nnl = max(s_.n_nonlinear for s_ in frf.solutions)
         say(f"| {ne} | {setup:.1f} | {len(frf.omega)} | {frf.newton_iterations} | "
@@ -158,7 +159,7 @@ def main(argv=None):
     p.add_argument("--elements", type=int, nargs="+", default=[10, 40, 160, 340, 680])
     p.add_argument("--dofs", type=int, default=2100, help="synthetic structure size")
     p.add_argument("--force", type=float, default=3000.0, help="synthetic excitation amplitude, N")
-    p.add_argument("--ds-max", type=float, default=0.06, help="largest arc-length step (scaled)")
+    p.add_argument("--ds-max", type=float, default=None, help="largest arc-length step (relative; solver default 0.1)")
     p.add_argument("--pyharm-python", default="/tmp/pyharm/bin/python",
                    help="interpreter with pyharm-os installed (skipped if missing)")
     p.add_argument("--skip-jenkins", action="store_true")

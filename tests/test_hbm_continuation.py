@@ -34,11 +34,35 @@ def test_frf_curve_matches_closed_form_h1():
     m, k, cc, kt, fs, F = 1.0, 1.0, 0.02, 1.0, 0.1, 0.1
     s = LinearStructure([[m]], [[k]], [[cc]])
     c = FrictionContacts(np.array([[[0, -1, -1], [-1, -1, -1]]]), kt=kt, kn=1.0, mu=fs, n0=1.0)
-    hb = HarmonicBalance(s, c, harmonics=1, samples=2048)
-    frf = hb.frf(0.7, 1.8, np.array([F]), dof=0, ds_max=0.3)
+    hb = HarmonicBalance(s, c, harmonics=1, samples=1024)
+    frf = hb.frf(0.7, 1.8, np.array([F]), dof=0, ds_max=0.3, max_domega=1.1 / 40)
     assert len(frf.omega) >= 20 and frf.stable.all() and not frf.turning_points
     ref = np.array([jenkins_frf_h1(w, m, k, cc, kt, fs, F)[0] for w in frf.omega])
-    assert np.max(np.abs(frf.amplitude - ref) / ref) <= 3e-5
+    # sampling error of the AFT at n_t = 1024 is a few 1e-5 (the 1e-5 check at n_t = 4096 is in
+    # test_hbm_oscillator); what this checks is that every continuation point is a solution
+    assert np.max(np.abs(frf.amplitude - ref) / ref) <= 6e-5
     # the peak is found between the slipping (1) and stuck (sqrt 2) resonances
     wpk = frf.omega[np.argmax(frf.amplitude)]
     assert 1.0 < wpk < np.sqrt(2.0)
+
+
+def test_lightly_damped_linear_peak_is_resolved():
+    """Joint stuck (mu huge), 0.2 % damping: the continuation must not step over the resonance."""
+    m1, m2, k, kt = 2.0, 1.0, 50.0, 40.0
+    M = np.diag([m1, m2])
+    K = k * np.array([[1.0, -1.0], [-1.0, 1.0]])
+    s = LinearStructure(M, K, damping_ratio=0.002)
+    c = FrictionContacts(np.array([[[0, -1, -1], [1, -1, -1]]]), kt=kt, kn=1.0, mu=1e6, n0=1.0)
+    hb = HarmonicBalance(s, c, harmonics=1, samples=32)
+    f = np.array([1.0, 0.0])
+    wn = np.sqrt((k + kt) * (m1 + m2) / (m1 * m2))
+    frf = hb.frf(0.5 * wn, 1.5 * wn, f, dof=0)
+    # exact linear FRF (modal damping 0.2 % of the elastic mode, rigid mode undamped)
+    lam, Phi = np.linalg.eigh(np.diag(1 / np.sqrt([m1, m2])) @ (K + kt * np.array([[1, -1], [-1, 1]]))
+                              @ np.diag(1 / np.sqrt([m1, m2])))
+    Phi = np.diag(1 / np.sqrt([m1, m2])) @ Phi
+    w = np.linspace(0.5 * wn, 1.5 * wn, 200001)
+    H = sum(np.outer(Phi[0, i] * Phi[0, i], 1.0 / (lam[i] - w**2 + 2j * 0.002 * np.sqrt(max(lam[i], 0)) * w))
+            for i in range(2))[0]
+    assert len(frf.omega) >= 100
+    assert abs(frf.amplitude.max() - np.abs(H).max()) <= 0.02 * np.abs(H).max()
