@@ -65,7 +65,8 @@ class ReducedModel:
         preload_normal_force: (n_pairs,) N (sum = bolt force).
         preload_pressure: (n_pairs,) MPa.
         preload_gap: (n_pairs,) mm (0 where closed).
-        preload_status: (n_pairs,) 0 open, 1 closed tied, 2 closed untied.
+        preload_status: (n_pairs,) 0 open, 1 closed tied, 2 closed untied, 3 closed vertex pair
+            inside the contact zone (see ``fe_joint.preload``); closed = status != 0.
         excitation_dof, response_dof: reduced indices (x direction on mass A).
         full_frequencies: (n_full,) free–free frequencies of the full FE model, Hz (rigid ≈ 0).
         reduced_frequencies: (n,) free–free frequencies of (K, M), Hz.

@@ -70,12 +70,16 @@ def test_box_pressure_mirror_symmetric_and_peaks_at_hole(box):
 def test_resonator_pressure_symmetric_and_peaks_next_to_hole(resonator):
     data, res, out = resonator
     xyz, N = data.pair_xyz, res.pair_normal_force
-    # the volume mesh is not exactly symmetric (only the lap faces are), so node-by-node values
-    # differ where a pair at the contact edge is closed on one side only; integral measures are
-    # symmetric: no moment about the x axis (1 %), equal load on both halves (3 % on this coarse mesh)
-    assert abs(np.sum(N * xyz[:, 1])) < 0.01 * np.sum(N * np.abs(xyz[:, 1]))
-    up, down = N[xyz[:, 1] > 1e-9].sum(), N[xyz[:, 1] < -1e-9].sum()
-    assert up == pytest.approx(down, rel=0.03)
+    # the lap faces are meshed mirror-symmetrically, the volume mesh only nearly so
+    from scipy.spatial import cKDTree
+    dist, mir = cKDTree(xyz[:, :2]).query(xyz[:, :2] * [1.0, -1.0])
+    assert dist.max() < 1e-3
+    p = res.pair_pressure
+    assert np.linalg.norm(p - p[mir]) < 0.01 * np.linalg.norm(p)
+    assert np.abs(p - p[mir]).max() < 0.02 * p.max()
+    assert abs(np.sum(N * xyz[:, 1])) < 0.01 * np.sum(N * np.abs(xyz[:, 1]))  # no moment about x
+    # (the y-halves' total loads differ by ~1 % on this coarse mesh: the lap triangulation, hence the
+    # tributary areas, is not exactly mirrored even where the nodes are)
     r = np.hypot(xyz[:, 0], xyz[:, 1])
     hole_r = COARSE.hole_diameter / 2
     assert r[np.argmax(res.pair_pressure)] < hole_r + 1.5 * COARSE.lap_mesh_size
