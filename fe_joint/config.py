@@ -97,8 +97,8 @@ class Dynamics:
     # excitation amplitudes on mass A in x (N); "auto" picks three levels from mostly stuck to
     # extensive slip with the nonlinear model (DESIGN §4.6)
     levels: Any = _f("auto")
-    band: list = _f([0.85, 1.03], lo=0.0, lo_open=True, hi=10.0, item=True)  # sweep band / f_linear
-    max_points: int = _f(200, lo=10, hi=100000)
+    band: list = _f([0.93, 1.01], lo=0.0, lo_open=True, hi=10.0, item=True)  # sweep band / f_linear
+    max_points: int = _f(400, lo=10, hi=100000)
     configurations: list = _f(["baseline", "smooth-ms", "v1", "v2", "v3"],
                               choices=("baseline", "smooth-ms", "v1", "v2", "v3"), item=True)
 
@@ -146,7 +146,7 @@ PRESETS: dict[str, dict] = {
         "geometry": {"lap_mesh_size": 4.0, "body_mesh_size": 14.0},   # 201 pairs, 23k DOFs
         "reduction": {"cutoff_hz": 3000.0, "n_check_modes": 4},
         "roughness": {"grid": 64, "patch": 8, "rq_um": [1.0, 15.0]},
-        "dynamics": {"harmonics": 1, "samples": 32, "max_points": 60},
+        "dynamics": {"harmonics": 1, "samples": 32, "max_points": 300},
         "contact": {"kt_max_passes": 2},
     },
     # the paper's resolution everywhere (256² global grid, 16² patches, 340-ish elements, H = 3)

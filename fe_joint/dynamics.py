@@ -14,11 +14,19 @@ from pathlib import Path
 
 import numpy as np
 
-from hbm import FrictionContacts, HarmonicBalance, LinearStructure
+from hbm import ConvergenceError, FrictionContacts, HarmonicBalance, LinearStructure
 
 from .joint import JointModel
 
 OPEN = 4   # status code of elements left out of the dynamics (hbm's OPEN)
+
+
+class SweepIncomplete(ConvergenceError):
+    """A frequency sweep that did not cover its band (its peak may be missing)."""
+
+    def __init__(self, message: str) -> None:
+        RuntimeError.__init__(self, message)
+        self.residual = float("nan")
 
 
 def structure(rm) -> LinearStructure:
@@ -104,8 +112,22 @@ def frf(rm, joint: JointModel, level: float, mu: float, f_lin: float, band: tupl
     force = np.zeros(rm.K.shape[0])
     force[rm.excitation_dof] = level
     w0, w1 = 2 * np.pi * f_lin * band[0], 2 * np.pi * f_lin * band[1]
-    res = hb.frf(w0, w1, force, dof=rm.response_dof, max_points=max_points)
+    # step guards: at most 1/50 of the band per step, and at most 25 % change of the response
+    # amplitude per step (hbm's defaults, 1/100 and 10 %, doubled the points for the same peak
+    # to 0.01 % on the quick model)
+    res = hb.frf(w0, w1, force, dof=rm.response_dof, max_points=max_points,
+                 max_domega=(w1 - w0) / 50, max_damp=0.25)
+    # a branch that stops short of the band end may miss the peak: say so, never report it
+    if res.omega[-1] < w1 * (1 - 1e-9):
+        raise SweepIncomplete(
+            f"FRF of {joint.name} at {level:.4g} N stopped at {res.omega[-1] / 2 / np.pi:.2f} Hz after "
+            f"{len(res.omega)} points, before the band end {w1 / 2 / np.pi:.2f} Hz: raise "
+            "dynamics.max_points")
     k = int(np.argmax(res.amplitude))
+    if k == len(res.omega) - 1:
+        raise SweepIncomplete(
+            f"FRF of {joint.name} at {level:.4g} N peaks at the band end "
+            f"({res.omega[-1] / 2 / np.pi:.2f} Hz): widen dynamics.band")
     peak_hz, peak_amp = _refine_peak(res.omega / (2 * np.pi), res.amplitude, k)
     er = hb.element_results(res.solutions[k])
     ne, nt = len(joint.area), er.T.shape[-1]

@@ -22,7 +22,7 @@ name = "e2e"
 rq_um = [1.0, 15.0]
 v_rq_um = 15.0
 [dynamics]
-max_points = 60
+configurations = ["baseline", "v1", "v3"]
 """
 
 
@@ -101,7 +101,6 @@ name = "e2e-mpi"
 rq_um = [1.0, 15.0]
 v_rq_um = 15.0
 [dynamics]
-max_points = 40
 configurations = ["baseline", "v3"]
 [contact]
 kt_max_passes = 1
