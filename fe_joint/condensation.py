@@ -40,11 +40,15 @@ class BoundaryCondensation:
         self.n_b = len(bd)
         lo, hi = K.getOwnershipRange()
         mine = (bd >= lo) & (bd < hi)
-        self.b_canon_local = np.nonzero(mine)[0]  # canonical positions of my boundary rows
+        # PETSc's parallel createSubMatrix needs sorted local indices: keep my boundary rows in
+        # increasing global order and remember the canonical position of each
+        order = np.argsort(bd[mine], kind="stable")
+        self.bd = bd
+        self.b_canon_local = np.nonzero(mine)[0][order]  # canonical positions of my boundary rows
         # sub-matrix row order is rank-major; remember the canonical index of every sub row
         self.b_canon_all = np.concatenate(self.mpi.allgather(self.b_canon_local))
         interior = np.setdiff1d(np.arange(lo, hi), bd[mine])
-        self.isB = PETSc.IS().createGeneral(bd[mine].astype(PETSc.IntType), comm=self.comm)
+        self.isB = PETSc.IS().createGeneral(bd[self.b_canon_local].astype(PETSc.IntType), comm=self.comm)
         self.isI = PETSc.IS().createGeneral(interior.astype(PETSc.IntType), comm=self.comm)
         self.n_i_local = len(interior)
         self.KII = K.createSubMatrix(self.isI, self.isI)
@@ -118,7 +122,7 @@ class BoundaryCondensation:
         sparse RHS in parallel, so there it is the dense product K_IB E.
         """
         if self.mpi.size == 1:
-            rows = PETSc.IS().createGeneral(self.isB.getIndices()[cols].astype(PETSc.IntType), comm=self.comm)
+            rows = PETSc.IS().createGeneral(self.bd[cols].astype(PETSc.IntType), comm=self.comm)
             Bt = self.K.createSubMatrix(rows, self.isI)
             T = PETSc.Mat().createTranspose(Bt)
             P = self._dense(self.n_i_local, self.KII.getSize()[0], len(cols))
