@@ -99,6 +99,7 @@ class Dynamics:
     levels: Any = _f("auto")
     band: list = _f([0.93, 1.01], lo=0.0, lo_open=True, hi=10.0, item=True)  # sweep band / f_linear
     max_points: int = _f(400, lo=10, hi=100000)
+    speed_study: bool = _f(True)                                   # speed-vs-error tables in the report
     configurations: list = _f(["baseline", "smooth-ms", "v1", "v2", "v3"],
                               choices=("baseline", "smooth-ms", "v1", "v2", "v3"), item=True)
 
@@ -146,7 +147,7 @@ PRESETS: dict[str, dict] = {
         "geometry": {"lap_mesh_size": 4.0, "body_mesh_size": 14.0},   # 201 pairs, 23k DOFs
         "reduction": {"cutoff_hz": 3000.0, "n_check_modes": 4},
         "roughness": {"grid": 64, "patch": 8, "rq_um": [1.0, 15.0]},
-        "dynamics": {"harmonics": 1, "samples": 32, "max_points": 300},
+        "dynamics": {"harmonics": 1, "samples": 32, "max_points": 300, "speed_study": False},
         "contact": {"kt_max_passes": 2},
     },
     # the paper's resolution everywhere (256² global grid, 16² patches, 340-ish elements, H = 3)
@@ -176,6 +177,9 @@ def _check_value(key: str, value: Any, f: dataclasses.Field) -> Any:
     elif ftype is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise CaseError(f"{key} = {value!r}: must be an integer")
+    elif ftype is bool:
+        if not isinstance(value, bool):
+            raise CaseError(f"{key} = {value!r}: must be true or false")
     elif ftype is str:
         if not isinstance(value, str):
             raise CaseError(f"{key} = {value!r}: must be a string")

@@ -186,12 +186,14 @@ def stage_report(ctx: StageContext) -> dict:
         from . import multiscale as ms
         from .dynamics import CurveResult
         rm = _reduced_model(ctx)
-        grids = (64, 128, 256, 512) if c.roughness.grid >= 256 else (32, 64, c.roughness.grid * 2)
-        speed = {"global BEM grid (Rq = %g µm)" % c.roughness.v_rq_um: speed_error.bem_grid(rm, c, grids)}
+        speed = None
         dyn = summaries["dynamics"]
-        top = len(dyn["levels"]) - 1
-        base = ctx.path("dynamics", f"baseline@L{top}.npz")
-        if base.exists():
+        mid = len(dyn["levels"]) // 2
+        base = ctx.path("dynamics", f"baseline@L{mid}.npz")
+        if c.dynamics.speed_study:
+            grids = (64, 128, 256, 512) if c.roughness.grid >= 256 else (32, 64, c.roughness.grid * 2)
+            speed = {"global BEM grid (Rq = %g µm)" % c.roughness.v_rq_um: speed_error.bem_grid(rm, c, grids)}
+        if c.dynamics.speed_study and base.exists():
             cr = CurveResult.load(base)
             setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
             joint = ms.joint_baseline(setup, c.contact.k_ref)

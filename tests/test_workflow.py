@@ -23,6 +23,7 @@ rq_um = [1.0, 15.0]
 v_rq_um = 15.0
 [dynamics]
 configurations = ["baseline", "v1", "v3"]
+levels = [2.0, 15.0, 40.0]
 """
 
 
