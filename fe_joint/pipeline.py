@@ -129,7 +129,9 @@ def stage_dynamics(ctx: StageContext) -> dict:
     inp = study.StudyInputs(rm=rm, setup=setup, surfaces=surfaces, kn_smooth=extra["kn_smooth"],
                             joints=joints, levels=levels, f_lin=f_lin, case=c)
     folder = ctx.path("dynamics")
-    study.prepare_folder(folder, ctx.keys["dynamics"], ctx.rank, ctx.comm)
+    # finished jobs are reused only for the same inputs and the same contact output
+    study.prepare_folder(folder, f"{ctx.keys['dynamics']}/{ctx.runs.get('contact')}", ctx.rank,
+                         ctx.comm)
     jobs = study.jobs_for(c, levels)
     # the small-excitation check: far below first slip the FRF peak is the stuck linear mode
     tiny = study.Job(name="check-linear@tiny", kind="curve", config="baseline", level_index=0)

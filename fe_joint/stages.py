@@ -4,8 +4,8 @@ A run is a fixed sequence of stages. Each stage depends on some case sections an
 before it; its *key* is the hash of those sections, the upstream keys and the stage's code
 version. When a stage finishes, it writes ``DIR/stages/<stage>.json`` (key, seconds, summary) —
 after its artifacts, so a killed run never leaves a manifest for half-written output. A rerun
-skips every stage whose manifest key matches (``cached`` in the log) and resumes at the first
-one that does not. Every action is appended to ``DIR/stage_log.jsonl``, which is also how the
+skips every stage whose manifest key matches and that was computed from the current output of
+the stage before it (``cached`` in the log), and resumes at the first one that does not. Every action is appended to ``DIR/stage_log.jsonl``, which is also how the
 tests check that finished stages are not recomputed.
 
 All MPI ranks call :func:`run_stages`; only rank 0 writes manifests and the log.
@@ -16,6 +16,7 @@ import hashlib
 import json
 import os
 import time
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -48,6 +49,7 @@ class StageContext:
     summaries: dict = field(default_factory=dict)
     progress: bool = True
     keys: dict = field(default_factory=dict)      # stage → cache key (for stage-internal caches)
+    runs: dict = field(default_factory=dict)      # stage → run id of its current output
 
     @property
     def rank(self) -> int:
@@ -120,13 +122,18 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
     last = max(STAGES.index(s) for s in stages)
     needed = STAGES[: last + 1]
     ctx = StageContext(case=case, out=out, comm=comm, progress=progress, keys=keys)
+    # a stage is cached only if its key matches and it was computed from the current output of
+    # the stage before it (each manifest records that stage's run id)
+    prev_run = None
     for s in needed:
         man = read_manifest(out, s)
-        cached = man is not None and man.get("key") == keys[s] and not (force and s in stages)
+        cached = (man is not None and man.get("key") == keys[s] and not (force and s in stages)
+                  and man.get("upstream_run") == prev_run)
         if comm is not None:  # every rank takes the same branch
             cached = comm.bcast(cached, root=0)
             man = comm.bcast(man, root=0)
         if cached:
+            prev_run = ctx.runs[s] = man.get("run_id")
             ctx.summaries[s] = man.get("summary", {})
             _log(out, rank, {"stage": s, "action": "cached", "key": keys[s], "seconds": 0.0})
             continue
@@ -137,9 +144,14 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
         summary = registry[s](ctx) or {}
         dt = time.perf_counter() - t0
         ctx.summaries[s] = summary
+        run_id = uuid.uuid4().hex if rank == 0 else None
+        if comm is not None:
+            run_id = comm.bcast(run_id, root=0)
         if rank == 0:
             _write_json_atomic(out / "stages" / f"{s}.json",
-                               {"stage": s, "key": keys[s], "seconds": dt, "summary": summary})
+                               {"stage": s, "key": keys[s], "seconds": dt, "summary": summary,
+                                "run_id": run_id, "upstream_run": prev_run})
+        prev_run = ctx.runs[s] = run_id
         _log(out, rank, {"stage": s, "action": "ran", "key": keys[s], "seconds": dt})
         ctx.print(f"[fe-joint] stage {s} done in {dt:.1f} s")
         if comm is not None:

@@ -62,3 +62,22 @@ def test_missing_stage_is_reported(tmp_path: Path) -> None:
     case = load_case(preset="quick")
     with pytest.raises(StageNotBuilt, match="mesh"):
         run_stages(case, tmp_path, ("mesh",), {})
+
+
+def test_forced_stage_reruns_everything_after_it(tmp_path: Path) -> None:
+    case = load_case(preset="quick")
+    calls: list = []
+    run_stages(case, tmp_path, STAGES, _registry(calls))
+    calls.clear()
+    run_stages(case, tmp_path, ("contact",), _registry(calls), force=True)
+    assert calls == ["contact"]
+    calls.clear()
+    # dynamics and report read contact's new output: they must not come from the cache
+    run_stages(case, tmp_path, STAGES, _registry(calls))
+    assert calls == ["dynamics", "report"]
+    calls.clear()
+    run_stages(case, tmp_path, STAGES, _registry(calls))
+    assert calls == []
+    (tmp_path / "stages" / "fe.json").unlink()
+    run_stages(case, tmp_path, STAGES, _registry(calls))
+    assert calls == ["fe", "contact", "dynamics", "report"]
