@@ -99,10 +99,11 @@ def test_report_written(run: Path) -> None:
 MPI_CASE = """
 name = "e2e-mpi"
 [roughness]
-rq_um = [1.0, 15.0]
+rq_um = [15.0]
 v_rq_um = 15.0
 [dynamics]
 configurations = ["baseline", "v3"]
+levels = [2.0, 15.0]
 [contact]
 kt_max_passes = 1
 """
@@ -126,9 +127,13 @@ def test_same_summary_on_one_and_two_ranks(tmp_path_factory) -> None:
     run_stages(case, d / "all", STAGES, REGISTRY, comm=comm, progress=False)
     if comm.rank == 0:
         a, b = _summary(d / "one"), _summary(d / "all")
+        # The FE results agree to ~1e-8 (tests/test_fe_mpi.py); a peak found by continuation with
+        # adaptive steps and polished to rtol 1e-6 in frequency agrees to the solver's precision:
+        # the amplitude is flat at a maximum, so the peak frequency is the least determined number.
         for key in a["peaks"]:
-            for q in ("peak_hz", "peak_amplitude"):
-                assert b["peaks"][key][q] == pytest.approx(a["peaks"][key][q], rel=1e-6), (key, q)
+            assert b["peaks"][key]["peak_amplitude"] == pytest.approx(a["peaks"][key]["peak_amplitude"],
+                                                                      rel=1e-6), key
+            assert b["peaks"][key]["peak_hz"] == pytest.approx(a["peaks"][key]["peak_hz"], rel=1e-5), key
         for rq, v in a["contact_fraction"].items():
             assert b["contact_fraction"][rq] == pytest.approx(v, rel=1e-9)
         for k, v in a["k_eq_vs_rq"].items():
