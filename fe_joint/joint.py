@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sla
 
+from .reduced_model import add_pair_springs
+
 
 @dataclass
 class JointModel:
@@ -66,17 +68,9 @@ def stuck_stiffness(K: np.ndarray, pair_dofs: np.ndarray, joint: JointModel) -> 
     Returns:
         (n, n) stiffness including k_t·A (t1, t2) and k_n·A (n) of every element with N0 > 0.
     """
-    Ks = np.array(K, dtype=float, copy=True)
     c = joint.closed
     k = np.stack([joint.kt, joint.kt, joint.kn], axis=1)[c] * joint.area[c, None]   # (nc, 3)
-    a = pair_dofs[c, 0, :].ravel()
-    b = pair_dofs[c, 1, :].ravel()
-    kv = k.ravel()
-    np.add.at(Ks, (a, a), kv)
-    np.add.at(Ks, (b, b), kv)
-    np.add.at(Ks, (a, b), -kv)
-    np.add.at(Ks, (b, a), -kv)
-    return Ks
+    return add_pair_springs(K, pair_dofs[c], k)
 
 
 @dataclass

@@ -19,6 +19,25 @@ _ARRAYS = ("K", "M", "C", "pair_xyz", "pair_area", "pair_frame", "pair_dofs", "p
            "preload_pressure", "preload_gap", "preload_status", "full_frequencies", "reduced_frequencies")
 
 
+def add_pair_springs(K: np.ndarray, pair_dofs: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """A copy of K with a spring between the A and B DOFs of each pair and direction.
+
+    Args:
+        K: (n, n) stiffness.
+        pair_dofs: (m, 2, 3) DOFs of sides A and B for (t1, t2, n).
+        k: (m, 3) spring stiffness per pair and direction, N/mm.
+    Returns:
+        (n, n) stiffness with the springs added.
+    """
+    Ks = np.array(K, dtype=float, copy=True)
+    a, b, kv = pair_dofs[:, 0, :].ravel(), pair_dofs[:, 1, :].ravel(), np.asarray(k, float).ravel()
+    np.add.at(Ks, (a, a), kv)
+    np.add.at(Ks, (b, b), kv)
+    np.add.at(Ks, (a, b), -kv)
+    np.add.at(Ks, (b, a), -kv)
+    return Ks
+
+
 def check_damping_ratio(damping_ratio: float) -> float:
     """Return the ratio if it is finite and in [0, 1), else raise ValueError."""
     if not (isinstance(damping_ratio, (int, float)) and np.isfinite(damping_ratio) and 0 <= damping_ratio < 1):
@@ -121,16 +140,9 @@ class ReducedModel:
             n: number of lowest frequencies returned.
         """
         kt = k_normal if k_tangential is None else k_tangential
-        K = self.K.copy()
         closed = self.preload_status != 0
-        for comp, k in ((0, kt), (1, kt), (2, k_normal)):
-            a = self.pair_dofs[closed, 0, comp]
-            b = self.pair_dofs[closed, 1, comp]
-            kk = k * self.pair_area[closed]
-            np.add.at(K, (a, a), kk)
-            np.add.at(K, (b, b), kk)
-            np.add.at(K, (a, b), -kk)
-            np.add.at(K, (b, a), -kk)
+        k = np.array([kt, kt, k_normal])[None, :] * self.pair_area[closed, None]
+        K = add_pair_springs(self.K, self.pair_dofs[closed], k)
         lam = sla.eigh(K, self.M, eigvals_only=True, subset_by_index=[0, min(n, self.n_dofs) - 1])
         return np.sign(lam) * np.sqrt(np.abs(lam)) / (2 * np.pi)
 
