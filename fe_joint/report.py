@@ -34,8 +34,8 @@ def _plt():
 def _map(ax, xy, values, title, cmap="viridis", label="", vmin=None, vmax=None, hole=None):
     sc = ax.scatter(xy[:, 0], xy[:, 1], c=values, s=18, cmap=cmap, vmin=vmin, vmax=vmax)
     if hole:
-        ax.add_patch(__import__("matplotlib.patches", fromlist=["Circle"]).Circle(
-            (0, 0), hole / 2, fill=False, lw=0.8, color="k"))
+        from matplotlib.patches import Circle
+        ax.add_patch(Circle((0, 0), hole / 2, fill=False, lw=0.8, color="k"))
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("x [mm]")
@@ -203,9 +203,8 @@ def write_report(out: Path, case, summaries: dict, speed: dict | None = None) ->
 
     # --- k_eq and contact fraction vs Rq (Figs. 15, 19) --------------------------------------------
     keq = {}
-    from .joint import JointModel  # noqa: F401  (k_eq definition documented there)
 
-    def k_eq(k):
+    def k_eq(k):  # Σ k_i A_i / Σ A_i, as JointModel.k_eq
         return float(np.sum(k * area) / np.sum(area))
     k_ref = case.contact.k_ref
     keq["baseline"] = {"kn": k_ref, "kt": k_ref}
