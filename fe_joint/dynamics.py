@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
+from types import SimpleNamespace
 from pathlib import Path
 
 import numpy as np
@@ -106,11 +107,23 @@ def frf(rm, joint: JointModel, level: float, mu: float, f_lin: float, band: tupl
         harmonics, samples: HBM harmonics and AFT samples per period.
         max_points: cap on continuation points.
     """
-    t0 = time.perf_counter()
+    return frf_with_peak(rm, joint, level, mu, f_lin, band, harmonics, samples, max_points)[0]
+
+
+def _setup(rm, joint: JointModel, level: float, mu: float, harmonics: int, samples: int):
     c, act = contacts(rm, joint, mu)
     hb = HarmonicBalance(structure(rm), c, harmonics=harmonics, samples=samples)
     force = np.zeros(rm.K.shape[0])
     force[rm.excitation_dof] = level
+    return hb, force, act
+
+
+def frf_with_peak(rm, joint: JointModel, level: float, mu: float, f_lin: float,
+                  band: tuple[float, float], harmonics: int, samples: int, max_points: int):
+    """:func:`frf`, also returning the contact harmonics at the peak, (ne, 3, 2H+1) over all pairs
+    (zeros for inactive ones): the warm start of :func:`peak_near` on a slightly changed joint."""
+    t0 = time.perf_counter()
+    hb, force, act = _setup(rm, joint, level, mu, harmonics, samples)
     w0, w1 = 2 * np.pi * f_lin * band[0], 2 * np.pi * f_lin * band[1]
     # step guards: at most 1/50 of the band per step, and at most 25 % change of the response
     # amplitude per step (hbm's defaults, 1/100 and 10 %, doubled the points for the same peak
@@ -129,6 +142,90 @@ def frf(rm, joint: JointModel, level: float, mu: float, f_lin: float, band: tupl
             f"FRF of {joint.name} at {level:.4g} N peaks at the edge of its branch "
             f"({res.omega[k] / 2 / np.pi:.2f} Hz): widen dynamics.band")
     peak_sol = _polish_peak(hb, force, rm.response_dof, res, k)
+    cr = _curve_result(hb, rm, joint, level, act, peak_sol, res.omega, res.amplitude,
+                       np.asarray(res.stable, bool), res.newton_iterations, t0)
+    return cr, _full_contact(joint, act, peak_sol)
+
+
+def _full_contact(joint: JointModel, act: np.ndarray, sol) -> np.ndarray:
+    out = np.zeros((len(joint.area),) + sol.contact.shape[1:])
+    out[act] = sol.contact
+    return out
+
+
+#: half-width of the frequency window :func:`peak_near` may search, relative
+PEAK_WINDOW = 0.03
+#: relative fall of the amplitude beyond a maximum that ends the local search
+PEAK_DROP = 0.01
+
+
+def peak_near(rm, joint: JointModel, level: float, mu: float, f_guess: float, guess: np.ndarray,
+              harmonics: int, samples: int, max_points: int = 80) -> tuple[CurveResult, np.ndarray]:
+    """The resonance peak of ``joint`` near ``f_guess``, without sweeping the whole band.
+
+    For the v3 fixed point, whose joint changes little from pass to pass: Newton at ``f_guess``
+    from ``guess`` (the previous pass's peak contact harmonics, as returned here and by
+    :func:`frf_with_peak`), then pseudo-arc-length continuation from
+    there in the direction in which the amplitude grows (turning points included) until it has
+    passed its maximum, then the same parabolic polish as :func:`frf`. The returned curve holds
+    only the points of that short branch (stability not computed: all marked stable).
+
+    Returns:
+        (CurveResult, contact harmonics at the peak (ne, 3, 2H+1)).
+
+    Raises:
+        SweepIncomplete (a ConvergenceError) when no interior peak is found within ±PEAK_WINDOW;
+        ConvergenceError when Newton fails — callers fall back to :func:`frf_with_peak`.
+    """
+    t0 = time.perf_counter()
+    hb, force, act = _setup(rm, joint, level, mu, harmonics, samples)
+    start = None
+    if guess is not None:
+        if guess.shape[1:] != (3, 2 * harmonics + 1):
+            raise ValueError(f"guess must have shape (ne, 3, {2 * harmonics + 1}), got {guess.shape}")
+        start = SimpleNamespace(contact=guess[act])   # elements new to the set start at rest
+    w = 2 * np.pi * f_guess
+    dof = rm.response_dof
+
+    def passed(amps):
+        # two points beyond a maximum and 1 % below it (small bumps of the sampled friction
+        # law are passed over); or as far below the start (the other way is up)
+        k = int(np.argmax(amps))
+        return len(amps) > k + 2 and amps[-1] < amps[k] * (1 - PEAK_DROP)
+
+    # first towards lower frequencies (callers start just above the expected peak, where the
+    # branch is single-valued even when it folds below the peak), then, if the amplitude falls
+    # that way, towards higher ones; the two pieces joined at the start bracket the maximum
+    pieces, its = [], 0
+    for direction in (-1.0, 1.0):
+        res = hb.frf(w, w * (1 + direction * PEAK_WINDOW), force, dof=dof, max_points=max_points,
+                     max_domega=w * 1e-3, max_damp=0.05, guess=start, stop=passed,
+                     stability="none")
+        its += res.newton_iterations
+        pieces.append(res)
+        if int(np.argmax(res.amplitude)) > 0:
+            break
+    if len(pieces) == 1:
+        omega, amp, sols = pieces[0].omega, pieces[0].amplitude, list(pieces[0].solutions)
+    else:
+        lo, hi = pieces
+        omega = np.concatenate([lo.omega[::-1], hi.omega[1:]])
+        amp = np.concatenate([lo.amplitude[::-1], hi.amplitude[1:]])
+        sols = list(lo.solutions)[::-1] + list(hi.solutions)[1:]
+    k = int(np.argmax(amp))
+    if not 0 < k < len(omega) - 1:
+        raise SweepIncomplete(f"no resonance peak of {joint.name} at {level:.4g} N within "
+                              f"±{100 * PEAK_WINDOW:g} % of {f_guess:.2f} Hz")
+    branch = SimpleNamespace(omega=omega, amplitude=amp, solutions=sols)
+    peak_sol = _polish_peak(hb, force, dof, branch, k)
+    order = np.argsort(omega)   # a short branch near the peak: shown by frequency
+    cr = _curve_result(hb, rm, joint, level, act, peak_sol, omega[order], amp[order],
+                       np.ones(len(omega), bool), its, t0)
+    return cr, _full_contact(joint, act, peak_sol)
+
+
+def _curve_result(hb, rm, joint, level, act, peak_sol, omega, amplitude, stable, iterations,
+                  t0) -> CurveResult:
     peak_hz = float(peak_sol.omega / (2 * np.pi))
     peak_amp = float(peak_sol.amplitude(rm.response_dof))
     er = hb.element_results(peak_sol)
@@ -147,13 +244,13 @@ def frf(rm, joint: JointModel, level: float, mu: float, f_lin: float, band: tupl
     elem_T[act] = er.T[:, 0, :]
     w = joint.area / joint.area.sum()
     return CurveResult(
-        config=joint.name, level=float(level), omega_hz=res.omega / (2 * np.pi),
-        amplitude=res.amplitude, stable=np.asarray(res.stable, bool),
+        config=joint.name, level=float(level), omega_hz=np.asarray(omega) / (2 * np.pi),
+        amplitude=np.asarray(amplitude), stable=stable,
         peak_hz=peak_hz, peak_amplitude=peak_amp,
         status=status, energy=energy, mean_normal=mean_normal, q_amp=q_amp,
         loop_u=(w[:, None] * elem_u).sum(axis=0), loop_T=elem_T.sum(axis=0),
         elem_u=elem_u, elem_T=elem_T, seconds=time.perf_counter() - t0,
-        newton_iterations=int(res.newton_iterations), n_points=len(res.omega),
+        newton_iterations=int(iterations), n_points=len(omega),
         n_active=len(act), n_nonlinear=int(np.sum(er.status > 0)))
 
 

@@ -4,6 +4,19 @@ from __future__ import annotations
 from .stages import StageNotBuilt
 
 
+class JobFailed(RuntimeError):
+    """A study job failed on some MPI rank; raised on every rank with the original's exit class.
+
+    Attributes:
+        job: name of the failed job.
+        code: exit status of the original exception (see :func:`classify`).
+    """
+
+    def __init__(self, job: str, code: int, message: str) -> None:
+        super().__init__(f"{job}: {message}")
+        self.job, self.code = job, int(code)
+
+
 def classify(e: BaseException) -> tuple[int, str]:
     """Exit status and one-line message for an exception that reached the CLI.
 
@@ -13,6 +26,8 @@ def classify(e: BaseException) -> tuple[int, str]:
         carries the residual reached), (4, msg) for a stage not built yet, (1, msg) otherwise.
     """
     msg = " ".join(str(e).split()) or type(e).__name__
+    if isinstance(e, JobFailed):
+        return e.code, msg
     names = {c.__name__ for c in type(e).__mro__}
     if "ConvergenceError" in names:
         return 3, f"did not converge: {msg}"

@@ -300,7 +300,8 @@ def _markdown(case, s, levels, configs, curve, rqs, surfaces, speed) -> str:
           f"Stuck-joint estimate (baseline, ζ = {case.reduction.damping_ratio:g}): macroslip at "
           f"{s['macroslip_estimate_N']:.3g} N. The paper's 500/1000/2000 N would put this resonator in gross "
           "slip, so the levels are where 10 % and 50 % of the loaded area would slip if the joint "
-          "stayed linear, and half the linear macroslip estimate (friction damping keeps the real slip lower; see the slipping elements below).", "",
+          "stayed linear, and twice the latter (the paper's step from 1000 to 2000 N); friction damping keeps "
+          "the real slip lower than the linear estimate — see the slipping elements below.", "",
           "| level | N | level / macroslip |", "|---|---|---|"]
     for i, (lv, r) in enumerate(zip(levels, s["levels_over_macroslip"])):
         L.append(f"| L{i} | {lv:.3g} | {r:.3f} |")

@@ -57,7 +57,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
                  max_points: int = 1000, ds: float | None = None, ds_max: float | None = None,
                  ds_min: float | None = None, max_corrector: int = 12,
                  stability: str = "auto", max_domega: float | None = None,
-                 max_damp: float = 0.1) -> FRFResult:
+                 max_damp: float = 0.1, guess=None, stop=None) -> FRFResult:
     """Continue the periodic response from omega_start to omega_end (rad/s).
 
     Args:
@@ -75,6 +75,10 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
             predictor from stepping over a lightly damped peak where the branch is flat.
         max_damp: largest relative change of the response amplitude per step (a step is halved
             otherwise), so the response DOF's peak is resolved even in a mode the contacts hardly see.
+        guess: optional Solution to start Newton from at omega_start (e.g. a neighbouring solution
+            of a slightly different system); default the linear-base response.
+        stop: optional callable(amplitudes) -> bool, called with the amplitudes of the points so
+            far after each point; True ends the branch there (e.g. once a peak has been passed).
 
     Returns:
         FRFResult. Raises ConvergenceError if the step falls below ds_min.
@@ -99,7 +103,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
     if not max_domega > 0:
         raise ValueError(f"max_domega must be > 0 rad/s, got {max_domega!r}")
 
-    sol = hb.solve(w0, force)
+    sol = hb.solve(w0, force, guess=guess)
     U = hb._from_el(sol.contact)
     # amplitude scale: the norm of the current solution, updated at every step, so that the
     # arc length measures *relative* changes of the response (a friction-limited peak far below
@@ -169,6 +173,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
     keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
     sols, taus = [sol], [t[-1]]
     amp_prev = sol.amplitude(dof)
+    amps = [amp_prev]
     w = w0
     while len(sols) < max_points:
         nu = np.linalg.norm(U)
@@ -229,6 +234,9 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
                 pass
             break
         if (w - w0) * direction < -abs(w1 - w0):
+            break
+        amps.append(amp_prev)
+        if stop is not None and stop(amps):
             break
     omega = np.array([s_.omega for s_ in sols])
     amp = np.array([s_.amplitude(dof) for s_ in sols])

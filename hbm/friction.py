@@ -386,15 +386,16 @@ class FrictionContacts:
         E = fourier.E
         eye = np.eye(2)
 
-        def cycle_ops(slip, rho, that):
-            stick = closed & ~slip
+        def cycle_ops(slip, rho, that, sel=slice(None)):
+            cl, m, kn_, kt_ = closed[sel], mu[sel], kn[sel], kt[sel]
+            stick = cl & ~slip
             P = eye - that[..., :, None] * that[..., None, :]
             A = np.where(stick[..., None, None], eye, rho[..., None, None] * P)
-            c = (mu[:, None, None] * slip[..., None]) * that                 # (k, nt, 2)
-            cn = c * (kn[:, None, None] * closed[..., None])                 # c_j * dN/du_n
-            S = np.empty((k, nt, 2, 3))
+            c = (m[:, None, None] * slip[..., None]) * that                  # (k, nt, 2)
+            cn = c * (kn_[:, None, None] * cl[..., None])                    # c_j * dN/du_n
+            S = np.empty(slip.shape + (2, 3))
             S[..., 0:2] = eye - A
-            S[..., 2] = -cn / kt[:, None, None]
+            S[..., 2] = -cn / kt_[:, None, None]
             active = np.nonzero(~stick.all(axis=0))[0]                       # samples where dw may change
             return A, cn, S, active
 
@@ -430,9 +431,10 @@ class FrictionContacts:
         if neutral.size and len(rec) > 1:
             # history from rest, only for the neutral elements
             dwh = np.zeros((neutral.size, 2, nx))
-            for cyc in rec[:-1]:
-                Ac, _, Sc, act = cycle_ops(*cyc)
-                Ac, SEc = Ac[neutral], sources(Sc[neutral])
+            for sl_c, rho_c, that_c in rec[:-1]:
+                # only the neutral elements' operators (not all, then sliced)
+                Ac, _, Sc, act = cycle_ops(sl_c[neutral], rho_c[neutral], that_c[neutral], neutral)
+                SEc = sources(Sc)
                 for j in act:
                     dwh = Ac[:, j] @ dwh + SEc[:, j]
             dw0[neutral] = dwh

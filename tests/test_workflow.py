@@ -117,6 +117,9 @@ def test_same_summary_on_one_and_two_ranks(tmp_path_factory) -> None:
     comm = MPI.COMM_WORLD
     if comm.size == 1:
         pytest.skip("MPI-only comparison: needs mpirun -n 2 (scripts/test runs it)")
+    # PETSc initializes collectively on COMM_WORLD when dolfinx is first imported: every rank
+    # imports it before rank 0 runs the serial reference alone
+    import dolfinx  # noqa: F401
     d = Path(comm.bcast(str(tmp_path_factory.mktemp("mpi")) if comm.rank == 0 else None, root=0))
     import tomllib
     from fe_joint.config import case_from_dict
