@@ -300,8 +300,7 @@ def _markdown(case, s, levels, configs, curve, rqs, surfaces, speed) -> str:
           f"Stuck-joint estimate (baseline, ζ = {case.reduction.damping_ratio:g}): macroslip at "
           f"{s['macroslip_estimate_N']:.3g} N. The paper's 500/1000/2000 N would put this resonator in gross "
           "slip, so the levels are where 10 % and 50 % of the loaded area would slip if the joint "
-          "stayed linear, and twice the latter (the paper's step from 1000 to 2000 N); friction damping keeps "
-          "the real slip lower than the linear estimate — see the slipping elements below.", "",
+          "stayed linear, and half the linear macroslip estimate (friction damping keeps the real slip lower; see the slipping elements below).", "",
           "| level | N | level / macroslip |", "|---|---|---|"]
     for i, (lv, r) in enumerate(zip(levels, s["levels_over_macroslip"])):
         L.append(f"| L{i} | {lv:.3g} | {r:.3f} |")
@@ -338,12 +337,22 @@ def _markdown(case, s, levels, configs, curve, rqs, surfaces, speed) -> str:
           "## Contact state, energy, hysteresis at resonance", "",
           "![status](figures/status_energy.png)", "", "![loops](figures/hysteresis_loops.png)", "",
           "## v3 fixed point (k_t from the BEM loops at resonance)", "",
-          "| surface | passes | converged | peak per pass [Hz] | k_t,eq per pass [N/mm³] |", "|---|---|---|---|---|"]
+          "Pass 0 is v2 (a full sweep); later passes search the peak locally from the previous one "
+          "(`local`, a full `sweep` if that fails), with Aitken-relaxed stiffness updates. The last "
+          "column compares the converged joint's full FRF peak with the last pass's.", "",
+          "| surface | passes | converged | peak per pass [Hz] | k_t,eq per pass [N/mm³] | search: points, s | relaxation | full FRF vs last pass |",
+          "|---|---|---|---|---|---|---|---|"]
     for k, v in s["v3"].items():
         h = v.get("history") or []
         peaks_ = ", ".join("%.3f" % x["peak_hz"] for x in h)
         kts_ = ", ".join("%.3g" % x["kt_eq"] for x in h)
-        L.append(f"| {k} | {len(h)} | {v.get('converged')} | {peaks_} | {kts_} |")
+        how = ", ".join(f"{x.get('search', 'sweep')} {x.get('points', '')} pts {x.get('seconds', 0):.0f} s"
+                        for x in h)
+        rel = ", ".join("%.2f" % x["relaxation"] for x in h if x.get("relaxation") is not None)
+        last = h[-1] if h else {}
+        agree = (f"{abs(last['sweep_peak_hz'] - last['peak_hz']) / last['peak_hz']:.1e}"
+                 if "sweep_peak_hz" in last else "same curve")
+        L.append(f"| {k} | {len(h)} | {v.get('converged')} | {peaks_} | {kts_} | {how} | {rel} | {agree} |")
     L += ["", "## Cost", "", "| stage | wall time [s] |", "|---|---|"]
     for k, v in s["timings_s"]["stages"].items():
         L.append(f"| {k} | {v:.1f} |")

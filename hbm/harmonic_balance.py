@@ -143,16 +143,20 @@ class HarmonicBalance:
         tol: Newton tolerance on ||R|| relative to the response norm.
         max_iter: Newton iteration limit.
         dense_limit: largest reduced system size factorized directly (else GMRES).
+        krylov_tol: relative GMRES tolerance of the reduced Newton systems (a Newton tolerance
+            of 1e-7 needs no more than 1e-8; 1e-11 keeps Newton quadratic down to 1e-9).
     """
 
     def __init__(self, s: LinearStructure, c: FrictionContacts, harmonics: int = 3,
                  samples: int = 128, tol: float = 1e-9, max_iter: int = 40,
-                 dense_limit: int = 400) -> None:
+                 dense_limit: int = 400, krylov_tol: float = 1e-11) -> None:
         if not isinstance(s, LinearStructure) or not isinstance(c, FrictionContacts):
             raise ValueError("HarmonicBalance(s, c): s must be a LinearStructure and c FrictionContacts")
         c.check_dofs(s.n)
         if not (0 < tol < 1):
             raise ValueError(f"tol must be in (0, 1), got {tol}")
+        if not (0 < krylov_tol < 1):
+            raise ValueError(f"krylov_tol must be in (0, 1), got {krylov_tol}")
         self.s, self.c = s, c
         self.fourier = Fourier(harmonics, samples)
         self.H, self.nH = self.fourier.H, self.fourier.nH
@@ -162,6 +166,7 @@ class HarmonicBalance:
         self.G = Receptance(s, self.B, self.k0)
         self.ne, self.nc = c.ne, 3 * c.ne
         self._pre = None          # cached preconditioner (GMRES path)
+        self.krylov_tol = float(krylov_tol)
         self.stats = {"residuals": 0, "linear_solves": 0, "gmres_iterations": 0}
 
     # ------------------------------------------------------------------ layouts
@@ -295,7 +300,7 @@ class HarmonicBalance:
 
             def cb(_):
                 it[0] += 1
-            x, info = spla.gmres(Aop, B[:, i], M=Mop, tol=1e-11, atol=0.0, restart=150,
+            x, info = spla.gmres(Aop, B[:, i], M=Mop, tol=self.krylov_tol, atol=0.0, restart=150,
                                  maxiter=4, callback=cb, callback_type="pr_norm")
             self.stats["gmres_iterations"] += it[0]
             if info != 0:
