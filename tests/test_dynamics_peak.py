@@ -89,3 +89,31 @@ def test_aitken_solves_linear_fixed_point_in_two_updates() -> None:
         assert np.abs(x - xs).max() <= 1e-12 * np.abs(xs).max(), a
         # the plain iteration after the same two updates is still far off
         assert np.abs((a * (a * 0 + b) + b) - xs).max() > 0.1
+
+
+def test_failed_fast_sweep_is_retried_with_strict_gmres(monkeypatch) -> None:
+    """A sweep that fails with the fast GMRES tolerance is rerun once with hbm's strict one; a
+    second failure is reported, not hidden."""
+    import fe_joint.dynamics as dyn
+    from fe_joint.dynamics import SweepIncomplete, frf
+    rm = _two_grounded_masses()
+    f = stuck_modes(rm.K, rm.M, rm.pair_dofs, _joint(2e3)).frequency
+    ref = frf(rm, _joint(2e3), 2.0, 0.5, f, (0.8, 1.1), 1, 32, 400)
+    tols = []
+    real = dyn._sweep
+
+    def flaky(*args):
+        tols.append(args[-1])
+        if len(tols) == 1:
+            raise SweepIncomplete("lost at a fold")
+        return real(*args)
+    monkeypatch.setattr(dyn, "_sweep", flaky)
+    cr = frf(rm, _joint(2e3), 2.0, 0.5, f, (0.8, 1.1), 1, 32, 400)
+    assert tols == [dyn.KRYLOV_TOL, 1e-11]
+    assert cr.peak_hz == pytest.approx(ref.peak_hz, rel=1e-9)
+
+    def broken(*args):
+        raise SweepIncomplete("lost at a fold")
+    monkeypatch.setattr(dyn, "_sweep", broken)
+    with pytest.raises(SweepIncomplete):
+        frf(rm, _joint(2e3), 2.0, 0.5, f, (0.8, 1.1), 1, 32, 400)
