@@ -30,7 +30,7 @@ STAGE_INPUTS: dict[str, tuple[tuple[str, ...], str]] = {
     # are one stage: splitting them would factorize the 60k-DOF stiffness twice
     "fe": (("geometry", "material", "preload", "reduction"), "1"),
     "contact": (("roughness", "contact", "material"), "1"),
-    "dynamics": (("contact", "dynamics", "roughness"), "5"),
+    "dynamics": (("contact", "dynamics", "roughness"), "6"),
     "report": ((), "1"),
 }
 STAGES: tuple[str, ...] = tuple(STAGE_INPUTS)
