@@ -17,7 +17,7 @@ slips extensively (resonance ≈ 2 % down). Friction damping caps the real respo
 nonlinear model slips less than that; the report gives, per level, the slipping fraction the HBM
 finds at resonance and the ratio of the level to the macroslip estimate. (Twice the middle level,
 the paper's 1000 → 2000 N step, was tried as the top level: it did not make the sweeps cheaper —
-the v3 curve needed 299 continuation points there against 149 at half the macroslip estimate.)
+the v3 curve needed 299 continuation points there against ≈ 145 at half the macroslip estimate.)
 """
 from __future__ import annotations
 
