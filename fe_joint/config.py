@@ -147,7 +147,7 @@ PRESETS: dict[str, dict] = {
         "geometry": {"lap_mesh_size": 4.0, "body_mesh_size": 14.0},   # 201 pairs, 23k DOFs
         "reduction": {"n_check_modes": 4},
         "roughness": {"grid": 64, "patch": 8, "rq_um": [1.0, 15.0]},
-        "dynamics": {"harmonics": 1, "samples": 32, "max_points": 300, "speed_study": False},
+        "dynamics": {"harmonics": 1, "samples": 32, "max_points": 600, "speed_study": False},
         "contact": {"kt_max_passes": 2},
     },
     # the paper's resolution everywhere (256² global grid, 16² patches, 340-ish elements, H = 3)
