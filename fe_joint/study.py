@@ -221,8 +221,7 @@ def run_v3(inp: StudyInputs, rq: float, level: float) -> dict:
                            rq_um=rq)
     final = curve
     if search == "local":
-        final = frf(inp.rm, joint, level, c.contact.mu, lin.frequency, tuple(d.band), d.harmonics,
-                    d.samples, d.max_points)
+        final = _frf(inp, joint, level, lin.frequency)
         history[-1]["sweep_peak_hz"] = final.peak_hz
         history[-1]["sweep_peak_amplitude"] = final.peak_amplitude
     return {"curve": final, "first": first, "kn": joint.kn, "kt": joint.kt, "history": history,
