@@ -12,10 +12,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from .config import PRESETS, CaseError, load_case
-from .stages import STAGES, StageNotBuilt
-
-EXIT_INPUT, EXIT_CONVERGENCE, EXIT_NOT_BUILT = 2, 3, 4
+from .case import PRESETS, load_case
+from .errors import EXIT_INPUT, CaseError
+from .pipeline.runner import STAGES
 
 
 class _Parser(argparse.ArgumentParser):
@@ -87,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "check":
-        from .config import case_to_toml
+        from .case import case_to_toml
         case = load_case(args.case, preset=args.preset)
         print(case_to_toml(case), end="")
         print(f"# {args.case}: valid", file=sys.stderr)
@@ -97,8 +96,8 @@ def _dispatch(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("results") / case.name
     from mpi4py import MPI
 
-    from .pipeline import REGISTRY
-    from .stages import run_stages
+    from .pipeline.runner import run_stages
+    from .pipeline.stages import REGISTRY
     ctx = run_stages(case, out, stages, REGISTRY, comm=MPI.COMM_WORLD,
                      progress=not args.no_progress)
     if MPI.COMM_WORLD.rank == 0:

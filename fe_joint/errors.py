@@ -1,7 +1,32 @@
-"""Mapping of exceptions to the CLI's one-line messages and exit statuses."""
+"""fe-joint's error classes and how the command line reports them.
+
+Three kinds of failure, three exit statuses (docs/design.md, "Errors"):
+
+* :class:`CaseError` — input rejected by validation (a case key, an option): exit 2, one line
+  naming the key and the allowed range, raised before anything is written.
+* a ``ConvergenceError`` of any package (this one for the FE chain, :mod:`hbm`'s,
+  :mod:`contact_bem`'s): exit 3, with the residual reached.
+* anything else is a bug: exit 1, "internal error: …", ``--debug`` for the traceback.
+"""
 from __future__ import annotations
 
-from .stages import StageNotBuilt
+import contact_bem
+import hbm
+
+EXIT_BUG, EXIT_INPUT, EXIT_CONVERGENCE = 1, 2, 3
+
+
+class CaseError(ValueError):
+    """A case file, preset or command-line value is invalid; the message names the key."""
+
+
+class ConvergenceError(RuntimeError):
+    """An iterative FE solve (eigen solver, contact active set) did not converge; the message
+    gives the residual or state reached."""
+
+
+#: every package's non-convergence (all carry the residual in their message)
+CONVERGENCE_ERRORS = (ConvergenceError, hbm.ConvergenceError, contact_bem.ConvergenceError)
 
 
 class JobFailed(RuntimeError):
@@ -18,23 +43,18 @@ class JobFailed(RuntimeError):
 
 
 def classify(e: BaseException) -> tuple[int, str]:
-    """Exit status and one-line message for an exception that reached the CLI.
+    """Exit status and one-line message for an exception that reached the command line.
 
     Returns:
-        (2, msg) for bad input (``ValueError`` and subclasses, e.g. ``CaseError``),
-        (3, msg) for non-convergence (any ``ConvergenceError`` of the packages; the message
-        carries the residual reached), (4, msg) for a stage not built yet, (1, msg) otherwise.
+        (2, msg) for a :class:`CaseError`, (3, "did not converge: …") for any package's
+        ConvergenceError, the original status for :class:`JobFailed`, and
+        (1, "internal error: … (run with --debug for the traceback)") for anything else.
     """
     msg = " ".join(str(e).split()) or type(e).__name__
     if isinstance(e, JobFailed):
         return e.code, msg
-    names = {c.__name__ for c in type(e).__mro__}
-    if "ConvergenceError" in names:
-        return 3, f"did not converge: {msg}"
-    if isinstance(e, StageNotBuilt):
-        return 4, msg
-    if isinstance(e, (ValueError, KeyError, TypeError)):
-        return 2, msg
-    if isinstance(e, FileNotFoundError):
-        return 2, msg
-    return 1, f"{type(e).__name__}: {msg}"
+    if isinstance(e, CaseError):
+        return EXIT_INPUT, msg
+    if isinstance(e, CONVERGENCE_ERRORS):
+        return EXIT_CONVERGENCE, f"did not converge: {msg}"
+    return EXIT_BUG, f"internal error: {type(e).__name__}: {msg} (run with --debug for the traceback)"

@@ -40,9 +40,9 @@ def worker(size: str, cutoff: float, chunk: int) -> None:
     import numpy as np
     from mpi4py import MPI
 
-    from fe_joint.elasticity import Material
-    from fe_joint.mesh import load_resonator
-    from fe_joint.reduction import build_reduced_model_from_fe
+    from fe_joint.case import Material
+    from fe_joint.fe.mesh import load_resonator
+    from fe_joint.fe.reduction import build_reduced_model_from_fe
     from geometry.resonator import ResonatorParams
 
     comm = MPI.COMM_WORLD
@@ -56,7 +56,7 @@ def worker(size: str, cutoff: float, chunk: int) -> None:
     if comm.rank == 0:
         from matplotlib.tri import LinearTriInterpolator, Triangulation
 
-        from fe_joint.preload import lap_triangles
+        from fe_joint.model.interface_contact import lap_triangles
         tri6 = lap_triangles(fe.data)
         sub = np.vstack([tri6[:, [0, 3, 5]], tri6[:, [3, 1, 4]], tri6[:, [5, 4, 2]], tri6[:, [3, 4, 5]]])
         xyz = rm.pair_xyz
@@ -79,10 +79,11 @@ def degree_worker(size: str, degree: int) -> None:
     """Free–free breathing frequency of the structure (no contact) for P1/P2; rank 0 prints JSON."""
     from mpi4py import MPI
 
-    from fe_joint.elasticity import Material, assemble_mass, assemble_stiffness, vector_space
-    from fe_joint.joint_setup import global_node_dofs
-    from fe_joint.mesh import load_resonator
-    from fe_joint.modal import free_modes
+    from fe_joint.case import Material
+from fe_joint.fe.elasticity import assemble_mass, assemble_stiffness, vector_space
+    from fe_joint.fe.assembly import global_node_dofs
+    from fe_joint.fe.mesh import load_resonator
+    from fe_joint.fe.modal import free_modes
     from geometry.resonator import ResonatorParams
 
     comm = MPI.COMM_WORLD

@@ -14,7 +14,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from fe_joint.mesh import load_resonator, mesh_statistics
+from fe_joint.fe.mesh import load_resonator, mesh_statistics
 from geometry import ResonatorParams, nominal_interface_area, nominal_volumes, scaled_jacobian
 
 PRESETS = {

@@ -20,12 +20,12 @@ import tempfile
 
 import numpy as np
 
-from fe_joint import multiscale as ms
-from fe_joint.config import load_case
-from fe_joint.dynamics import contacts, structure
-from fe_joint.elasticity import Material
-from fe_joint.joint import JointModel, stuck_modes
-from fe_joint.reduction import build_reduced_model
+from fe_joint.study import contact as ms
+from fe_joint.case import load_case
+from fe_joint.study.frf import contacts, structure
+from fe_joint.case import Material
+from fe_joint.model.joint import JointModel, stuck_modes
+from fe_joint.fe.reduction import build_reduced_model
 from hbm import HarmonicBalance
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -18,9 +18,9 @@ import tempfile
 import numpy as np
 from mpi4py import MPI
 
-from fe_joint.config import load_case
-from fe_joint.elasticity import Material
-from fe_joint.reduction import build_reduced_model
+from fe_joint.case import load_case
+from fe_joint.case import Material
+from fe_joint.fe.reduction import build_reduced_model
 
 comm = MPI.COMM_WORLD
 case = load_case(preset="quick")

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from fe_joint.cli import main
-from fe_joint.config import Case, CaseError, case_to_toml, default_case_text, load_case
+from fe_joint.case import Case, CaseError, case_to_toml, default_case_text, load_case
 
 # (TOML text, the key the one-line message must name)
 BAD = [

@@ -7,9 +7,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from fe_joint.dynamics import frf_with_peak, peak_near
-from fe_joint.joint import JointModel, stuck_modes
-from fe_joint.study import _aitken
+from fe_joint.study.frf import SweepSettings, frf_with_peak, peak_near
+from fe_joint.model.joint import JointModel, stuck_modes
+from fe_joint.study.fixed_point import _aitken
 
 
 def _two_grounded_masses():
@@ -25,6 +25,10 @@ def _two_grounded_masses():
                            damping_ratio=5e-3, excitation_dof=0, response_dof=0)
 
 
+#: μ = 0.5, band 0.8–1.1, H = 1, 32 samples, 400 points at most
+SETTINGS = SweepSettings(harmonics=1, samples=32, band=(0.8, 1.1), max_points=400, mu=0.5)
+
+
 def _joint(kt: float) -> JointModel:
     return JointModel("t", n0=np.array([30.0]), gap=np.zeros(1), kn=np.array([4e4]),
                       kt=np.array([kt]), area=np.array([1.0]))
@@ -32,7 +36,7 @@ def _joint(kt: float) -> JointModel:
 
 def _sweep(rm, joint, level):
     f = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency
-    return frf_with_peak(rm, joint, level, 0.5, f, (0.8, 1.1), 1, 32, 400)
+    return frf_with_peak(rm, joint, level, f, SETTINGS)
 
 
 @pytest.mark.parametrize("change", [1.0, 1.03, 0.97])
@@ -45,7 +49,7 @@ def test_local_peak_matches_full_sweep(change: float) -> None:
     assert first.n_nonlinear == 1          # the element slips at the peak: a nonlinear peak
     joint = _joint(2e3 * change)
     ref, _ = _sweep(rm, joint, level)
-    loc, state2 = peak_near(rm, joint, level, 0.5, first.peak_hz * (1 + 1e-3), state, 1, 32)
+    loc, state2 = peak_near(rm, joint, level, first.peak_hz * (1 + 1e-3), state, SETTINGS)
     assert loc.n_points < ref.n_points / 3
     # one element's stick–slip peak is nearly a cusp, where the parabolic polish of either
     # search stops a few 1e-5 short; the v3 tolerance is 1e-3
@@ -58,18 +62,18 @@ def test_local_peak_from_below_the_peak() -> None:
     """Started below the peak the search turns round and still finds it."""
     rm = _two_grounded_masses()
     ref, state = _sweep(rm, _joint(2e3), 2.0)
-    loc, _ = peak_near(rm, _joint(2e3), 2.0, 0.5, ref.peak_hz * (1 - 4e-3), state, 1, 32)
+    loc, _ = peak_near(rm, _joint(2e3), 2.0, ref.peak_hz * (1 - 4e-3), state, SETTINGS)
     assert loc.peak_hz == pytest.approx(ref.peak_hz, rel=2e-5)
 
 
 def test_local_peak_without_a_peak_raises() -> None:
     """A linear joint far from its resonance: no peak within the window → an error, not a point."""
-    from fe_joint.dynamics import SweepIncomplete
+    from fe_joint.study.frf import SweepIncomplete
     rm = _two_grounded_masses()
     _, state = _sweep(rm, _joint(2e3), 2.0)
     f = stuck_modes(rm.K, rm.M, rm.pair_dofs, _joint(2e3)).frequency
     with pytest.raises(SweepIncomplete):
-        peak_near(rm, _joint(2e3), 2.0, 0.5, 0.5 * f, state, 1, 32, max_points=30)
+        peak_near(rm, _joint(2e3), 2.0, 0.5 * f, state, SETTINGS, max_points=30)
 
 
 def test_aitken_solves_linear_fixed_point_in_two_updates() -> None:
@@ -94,11 +98,11 @@ def test_aitken_solves_linear_fixed_point_in_two_updates() -> None:
 def test_failed_fast_sweep_is_retried_with_strict_tolerances(monkeypatch) -> None:
     """A sweep that fails with the fast tolerances is rerun once with hbm's strict ones; a second
     failure is reported, not hidden."""
-    import fe_joint.dynamics as dyn
-    from fe_joint.dynamics import SweepIncomplete, frf
+    import fe_joint.study.frf as dyn
+    from fe_joint.study.frf import SweepIncomplete, frf
     rm = _two_grounded_masses()
     f = stuck_modes(rm.K, rm.M, rm.pair_dofs, _joint(2e3)).frequency
-    ref = frf(rm, _joint(2e3), 2.0, 0.5, f, (0.8, 1.1), 1, 32, 400)
+    ref = frf(rm, _joint(2e3), 2.0, f, SETTINGS)
     tols = []
     real = dyn._sweep
 
@@ -108,7 +112,7 @@ def test_failed_fast_sweep_is_retried_with_strict_tolerances(monkeypatch) -> Non
             raise SweepIncomplete("lost at a fold")
         return real(*args)
     monkeypatch.setattr(dyn, "_sweep", flaky)
-    cr = frf(rm, _joint(2e3), 2.0, 0.5, f, (0.8, 1.1), 1, 32, 400)
+    cr = frf(rm, _joint(2e3), 2.0, f, SETTINGS)
     assert tols == list(dyn.SWEEP_TOLERANCES) and tols[1] == (1e-9, 1e-11)
     assert cr.peak_hz == pytest.approx(ref.peak_hz, rel=2e-5)   # strict vs fast: same peak
 
@@ -116,4 +120,4 @@ def test_failed_fast_sweep_is_retried_with_strict_tolerances(monkeypatch) -> Non
         raise SweepIncomplete("lost at a fold")
     monkeypatch.setattr(dyn, "_sweep", broken)
     with pytest.raises(SweepIncomplete):
-        frf(rm, _joint(2e3), 2.0, 0.5, f, (0.8, 1.1), 1, 32, 400)
+        frf(rm, _joint(2e3), 2.0, f, SETTINGS)

@@ -6,8 +6,9 @@ from mpi4py import MPI
 import dolfinx
 import ufl
 
-from fe_joint.elasticity import Material, assemble_eigenstrain_load, assemble_mass, assemble_stiffness, vector_space
-from fe_joint.modal import free_modes, solve_eigenproblem, to_hz, vec_values_at
+from fe_joint.case import Material
+from fe_joint.fe.elasticity import assemble_eigenstrain_load, assemble_mass, assemble_stiffness, vector_space
+from fe_joint.fe.modal import free_modes, solve_eigenproblem, to_hz, vec_values_at
 
 MAT = Material()
 L, H = 100.0, 5.0  # slender (L/h = 20): shear and rotary inertia change f1 by < 0.2 %

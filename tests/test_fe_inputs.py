@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fe_joint.box_joint import build_box_joint
-from fe_joint.elasticity import Material
-from fe_joint.joint_setup import check_mesh_data
-from fe_joint.mesh import mesh_from_data
-from fe_joint.preload import solve_preload
-from fe_joint.reduction import build_reduced_model_from_fe
+from fe_joint.fe.box_joint import build_box_joint
+from fe_joint.case import Material
+from fe_joint.fe.assembly import check_mesh_data
+from fe_joint.fe.mesh import mesh_from_data
+from fe_joint.fe.preload import solve_preload
+from fe_joint.fe.reduction import build_reduced_model_from_fe
 
 
 @pytest.fixture(scope="module")

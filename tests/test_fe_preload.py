@@ -3,11 +3,12 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fe_joint.box_joint import build_box_joint
-from fe_joint.elasticity import Material
-from fe_joint.mesh import load_resonator, mesh_from_data
-from fe_joint.preload import (OPEN, TIED, recover_pressure, lap_triangles, solve_interface_contact,
-                              solve_preload)
+from fe_joint.fe.box_joint import build_box_joint
+from fe_joint.case import Material
+from fe_joint.fe.mesh import load_resonator, mesh_from_data
+from fe_joint.fe.preload import solve_preload
+from fe_joint.model.interface_contact import (OPEN, TIED, lap_triangles, recover_pressure,
+                                              solve_interface_contact)
 from geometry.resonator import ResonatorParams
 
 F = 30000.0

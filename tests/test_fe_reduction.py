@@ -10,13 +10,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from mpi4py import MPI
 
-from fe_joint.box_joint import build_box_joint
-from fe_joint.condensation import BoundaryCondensation
-from fe_joint.elasticity import Material
-from fe_joint.joint_setup import assemble_joint
-from fe_joint.mesh import load_resonator, mesh_from_data
-from fe_joint.reduced_model import ReducedModel, modal_damping_matrix
-from fe_joint.reduction import build_reduced_model_from_fe
+from fe_joint.fe.box_joint import build_box_joint
+from fe_joint.fe.condensation import BoundaryCondensation
+from fe_joint.case import Material
+from fe_joint.fe.assembly import assemble_joint
+from fe_joint.fe.mesh import load_resonator, mesh_from_data
+from fe_joint.model.reduced_model import ReducedModel, modal_damping_matrix
+from fe_joint.fe.reduction import build_reduced_model_from_fe
 from geometry.resonator import ResonatorParams
 
 COARSE = ResonatorParams(lap_mesh_size=4.0, body_mesh_size=14.0, leaf_mesh_size=6.0)
@@ -86,7 +86,7 @@ def test_hdf5_roundtrip_without_dolfinx(reduced):
     rm, out = reduced
     path = os.path.join(out, "reduced_model.h5")
     code = ("import sys; sys.modules['dolfinx'] = None; sys.modules['petsc4py'] = None\n"
-            "from fe_joint.reduced_model import ReducedModel\n"
+            "from fe_joint.model.reduced_model import ReducedModel\n"
             f"m = ReducedModel.load({path!r}); print(m.K.shape[0], m.K.sum(), m.excitation_dof)")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                          cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

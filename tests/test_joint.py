@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fe_joint.joint import JointModel, slip_onset, stuck_modes, stuck_stiffness
+from fe_joint.model.joint import JointModel, slip_onset, stuck_modes, stuck_stiffness
 
 
 def _two_blocks(m1=2e-3, m2=3e-3, k_mount=1e3):
@@ -65,7 +65,7 @@ def test_slip_onset_single_element() -> None:
 
 # ---- FE → BEM interface -------------------------------------------------------------------
 from contact_bem import extract_patches
-from fe_joint.interface import element_loads, interface_grid, patch_side, smooth_fields
+from fe_joint.study.interface import element_loads, interface_grid, patch_side, smooth_fields
 
 
 def _pairs(n=9, L=20.0, W=20.0, hole=8.5):

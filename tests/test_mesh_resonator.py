@@ -9,7 +9,8 @@ import ufl
 from mpi4py import MPI
 
 import dolfinx
-from fe_joint.mesh import load_resonator, original_node_dofs, write_mesh_artifacts
+from fe_joint.fe.mesh import load_resonator, original_node_dofs
+from fe_joint.fe.output import write_mesh_artifacts
 from geometry import (LAP_A, LAP_B, MARKER_NAMES, WASHER_HEAD, ResonatorParams, cell_volumes,
                       nominal_interface_area, nominal_volumes)
 

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from fe_joint.config import load_case
-from fe_joint.stages import STAGES, StageNotBuilt, read_stage_log, run_stages, stage_keys
+from fe_joint.case import load_case
+from fe_joint.pipeline.runner import STAGES, read_stage_log, run_stages, stage_keys
 
 
 class Killed(Exception):
@@ -46,22 +46,25 @@ def test_changed_section_reruns_downstream_only(tmp_path: Path) -> None:
     calls: list = []
     run_stages(case, tmp_path, STAGES, _registry(calls))
     assert calls == list(STAGES)
-    # friction coefficient: contact onwards must rerun, FE stages must not
+    # friction coefficient: the BEM (contact) does not read it; dynamics onwards must rerun
     case2 = dataclasses.replace(case, contact=dataclasses.replace(case.contact, mu=0.3))
     k1, k2 = stage_keys(case), stage_keys(case2)
-    assert [s for s in STAGES if k1[s] != k2[s]] == ["contact", "dynamics", "report"]
+    assert [s for s in STAGES if k1[s] != k2[s]] == ["dynamics", "speed", "report"]
     calls.clear()
     run_stages(case2, tmp_path, STAGES, _registry(calls))
-    assert calls == ["contact", "dynamics", "report"]
+    assert calls == ["dynamics", "speed", "report"]
     calls.clear()
     run_stages(case2, tmp_path, STAGES, _registry(calls), force=False)
     assert calls == []
 
 
-def test_missing_stage_is_reported(tmp_path: Path) -> None:
+def test_speed_study_switch_keeps_the_curves() -> None:
+    """dynamics.speed_study is read by the speed stage only: toggling it keeps every dynamics
+    curve (the dynamics key) and reruns speed and report."""
     case = load_case(preset="quick")
-    with pytest.raises(StageNotBuilt, match="mesh"):
-        run_stages(case, tmp_path, ("mesh",), {})
+    case2 = dataclasses.replace(case, dynamics=dataclasses.replace(case.dynamics, speed_study=True))
+    k1, k2 = stage_keys(case), stage_keys(case2)
+    assert [s for s in STAGES if k1[s] != k2[s]] == ["speed", "report"]
 
 
 def test_forced_stage_reruns_everything_after_it(tmp_path: Path) -> None:
@@ -74,10 +77,10 @@ def test_forced_stage_reruns_everything_after_it(tmp_path: Path) -> None:
     calls.clear()
     # dynamics and report read contact's new output: they must not come from the cache
     run_stages(case, tmp_path, STAGES, _registry(calls))
-    assert calls == ["dynamics", "report"]
+    assert calls == ["dynamics", "speed", "report"]
     calls.clear()
     run_stages(case, tmp_path, STAGES, _registry(calls))
     assert calls == []
     (tmp_path / "stages" / "fe.json").unlink()
     run_stages(case, tmp_path, STAGES, _registry(calls))
-    assert calls == ["fe", "contact", "dynamics", "report"]
+    assert calls == ["fe", "contact", "dynamics", "speed", "report"]

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from fe_joint.cli import main
-from fe_joint.config import load_case
-from fe_joint.stages import STAGES, read_stage_log, run_stages
+from fe_joint.case import load_case
+from fe_joint.pipeline.runner import STAGES, read_stage_log, run_stages
 
 CASE = """
 name = "e2e"
@@ -57,7 +57,7 @@ def test_zero_roughness_reproduces_fe_pressure(run: Path) -> None:
 
 
 def test_element_loads_sum_to_bolt_force(run: Path) -> None:
-    from fe_joint.multiscale import load_surfaces
+    from fe_joint.study.contact import load_surfaces
     surfaces, _ = load_surfaces(run / "contact" / "surfaces.npz")
     case = load_case(preset="quick")
     for sc in surfaces.values():
@@ -128,7 +128,7 @@ kt_max_passes = 1
 def test_same_summary_on_one_and_two_ranks(tmp_path_factory) -> None:
     from mpi4py import MPI
 
-    from fe_joint.pipeline import REGISTRY
+    from fe_joint.pipeline.stages import REGISTRY
     comm = MPI.COMM_WORLD
     if comm.size == 1:
         pytest.skip("MPI-only comparison: needs mpirun -n 2 (scripts/test runs it)")
@@ -137,7 +137,7 @@ def test_same_summary_on_one_and_two_ranks(tmp_path_factory) -> None:
     import dolfinx  # noqa: F401
     d = Path(comm.bcast(str(tmp_path_factory.mktemp("mpi")) if comm.rank == 0 else None, root=0))
     import tomllib
-    from fe_joint.config import case_from_dict
+    from fe_joint.case import case_from_dict
     case = case_from_dict(tomllib.loads(MPI_CASE), preset="quick")
     if comm.rank == 0:   # the serial reference, on this rank alone
         run_stages(case, d / "one", STAGES, REGISTRY, comm=MPI.COMM_SELF, progress=False)

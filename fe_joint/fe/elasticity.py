@@ -4,8 +4,6 @@ Units N, mm, s, tonne: E in MPa, density in t/mm³, so K is N/mm, M is t and fre
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import ufl
 from petsc4py import PETSc
@@ -13,32 +11,7 @@ from petsc4py import PETSc
 import dolfinx
 import dolfinx.fem.petsc
 
-
-@dataclass(frozen=True)
-class Material:
-    """Isotropic linear elastic material (steel by default).
-
-    Attributes:
-        young: Young's modulus E, MPa.
-        poisson: Poisson's ratio nu, in (-1, 0.5).
-        density: mass density rho, t/mm³.
-    """
-
-    young: float = 198400.0
-    poisson: float = 0.3
-    density: float = 7.949e-9
-
-    def __post_init__(self):
-        for name, val, lo, hi in (("young", self.young, 0.0, np.inf), ("poisson", self.poisson, -1.0, 0.5),
-                                  ("density", self.density, 0.0, np.inf)):
-            if not (np.isfinite(val) and lo < val < hi):
-                raise ValueError(f"material.{name} must be in ({lo}, {hi}), got {val}")
-
-    @property
-    def lame(self) -> tuple[float, float]:
-        """Lamé parameters (lambda, mu), MPa."""
-        e, nu = self.young, self.poisson
-        return e * nu / ((1 + nu) * (1 - 2 * nu)), e / (2 * (1 + nu))
+from ..case.schema import Material
 
 
 def vector_space(mesh: "dolfinx.mesh.Mesh", degree: int = 2) -> "dolfinx.fem.FunctionSpace":

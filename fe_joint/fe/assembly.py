@@ -13,9 +13,9 @@ import numpy as np
 import ufl
 from mpi4py import MPI
 
-from fe_joint.elasticity import (Material, assemble_eigenstrain_load, assemble_mass, assemble_stiffness,
+from .elasticity import (Material, assemble_eigenstrain_load, assemble_mass, assemble_stiffness,
                                  vector_space)
-from fe_joint.mesh import original_node_dofs
+from .mesh import original_node_dofs
 
 SHANK_MARKER = 3
 
@@ -171,7 +171,7 @@ def shank_axial_force(problem: JointProblem, u, eigenstrain: float) -> float:
     (shank volume / length) measures it independently of the contact forces. The parts of the
     shank inside the nut/head are excluded (the force is handed over there).
     """
-    from fe_joint.elasticity import axial_eigenstrain, strain, stress
+    from .elasticity import axial_eigenstrain, strain, stress
     import dolfinx.fem as fem
 
     mesh = problem.V.mesh

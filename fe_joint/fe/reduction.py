@@ -16,9 +16,9 @@ import time
 import numpy as np
 from petsc4py import PETSc
 
-from fe_joint.condensation import BoundaryCondensation
-from fe_joint.modal import free_modes, mumps_cholesky, solve_eigenproblem, to_hz
-from fe_joint.reduced_model import ReducedModel, check_damping_ratio, modal_damping_matrix
+from .condensation import BoundaryCondensation
+from .modal import free_modes, mumps_cholesky, solve_eigenproblem, to_hz
+from ..model.reduced_model import ReducedModel, check_damping_ratio, modal_damping_matrix
 
 
 def _peak_mb() -> float:
@@ -192,8 +192,8 @@ def build_reduced_model_from_fe(fe, material, preload_force: float, damping_rati
     Returns:
         ReducedModel (identical on every rank).
     """
-    from fe_joint.joint_setup import assemble_joint
-    from fe_joint.preload import solve_preload
+    from .assembly import assemble_joint
+    from .preload import solve_preload
 
     if not (np.isfinite(preload_force) and preload_force > 0):
         raise ValueError(f"preload_force must be a finite bolt force > 0 N, got {preload_force}")
@@ -251,6 +251,6 @@ def build_reduced_model(params, material, preload_force: float, damping_ratio: f
     """
     from mpi4py import MPI
 
-    from fe_joint.mesh import load_resonator
+    from .mesh import load_resonator
     fe = load_resonator(params, MPI.COMM_WORLD if comm is None else comm)
     return build_reduced_model_from_fe(fe, material, preload_force, damping_ratio, cutoff_hz, out_dir, **kw)

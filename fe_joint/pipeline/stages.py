@@ -1,17 +1,32 @@
 """The stages of ``fe-joint run``: thin functions that call the packages and write artifacts.
 
-Each function takes a :class:`~fe_joint.stages.StageContext`, runs on every MPI rank, writes its
-artifacts on rank 0 and returns a small JSON-able summary (kept in the stage manifest and used
-by the report).
+Each function takes a :class:`~fe_joint.pipeline.runner.StageContext`, runs on every MPI rank,
+writes its artifacts on rank 0 and returns a small JSON-able summary (kept in the stage manifest
+and read by the report). Only ``mesh`` and ``fe`` touch the FE package (dolfinx), and they import
+it when they run, so the other stages — and ``fe-joint report`` — work without dolfinx.
 """
 from __future__ import annotations
 
-from .stages import StageContext
+import json
+import time
+
+import numpy as np
+
+from ..model.joint import stuck_modes
+from ..model.reduced_model import ReducedModel
+from ..study import contact as ms
+from ..study import jobs as study
+from ..study.artifacts import CurveKey, load_curves, rq_label
+from ..study.configurations import choose_levels, fixed_joints, joint_baseline
+from ..study.frf import SweepSettings
+from ..study.queue import prepare_folder, run_jobs
+from .runner import StageContext
 
 
 def stage_mesh(ctx: StageContext) -> dict:
     """Build the gmsh resonator, load it into dolfinx, write mesh.xdmf, pairs.csv, geometry.png."""
-    from .mesh import load_resonator, write_mesh_artifacts
+    from ..fe.mesh import load_resonator
+    from ..fe.output import write_mesh_artifacts
     fe = load_resonator(ctx.case.geometry, ctx.comm)
     stats = write_mesh_artifacts(fe, ctx.path("mesh"))
     ctx.print(f"[fe-joint] mesh: {stats.get('n_nodes')} nodes, {stats.get('n_cells')} cells, "
@@ -19,23 +34,12 @@ def stage_mesh(ctx: StageContext) -> dict:
     return stats
 
 
-REGISTRY = {
-    "mesh": stage_mesh,
-}
-
-
 def stage_fe(ctx: StageContext) -> dict:
     """Bolt preload with smooth interface contact, free–free modes and Craig–Bampton → ReducedModel."""
-    import dataclasses
-
-    import numpy as np
-
-    from .elasticity import Material
-    from .reduction import build_reduced_model
+    from ..fe.reduction import build_reduced_model
     c = ctx.case
-    rm = build_reduced_model(c.geometry, Material(**dataclasses.asdict(c.material)),
-                             c.preload.bolt_force, c.reduction.damping_ratio, c.reduction.cutoff_hz,
-                             comm=ctx.comm, out_dir=str(ctx.path("fe")),
+    rm = build_reduced_model(c.geometry, c.material, c.preload.bolt_force, c.reduction.damping_ratio,
+                             c.reduction.cutoff_hz, comm=ctx.comm, out_dir=str(ctx.path("fe")),
                              n_full_elastic=c.reduction.n_check_modes + 2)
     full = np.asarray(rm.full_frequencies)
     red = np.asarray(rm.reduced_frequencies)
@@ -56,19 +60,18 @@ def stage_fe(ctx: StageContext) -> dict:
     return summary
 
 
-REGISTRY["fe"] = stage_fe
-
-
-def _reduced_model(ctx: StageContext):
-    from .reduced_model import ReducedModel
+def _reduced_model(ctx: StageContext) -> ReducedModel:
     return ReducedModel.load(str(ctx.path("fe", "reduced_model.h5")))
+
+
+def _surface_summary(s: ms.SurfaceContact) -> dict:
+    return {"rq_um": s.rq_um, "contact_fraction": s.contact_fraction, "iterations": s.iterations,
+            "kn_mean": float(np.mean(s.kn)), "kn_max": float(np.max(s.kn)),
+            "load_scale": s.load_scale, "loaded_elements": int(np.sum(s.n0 > 0)), "seconds": s.seconds}
 
 
 def stage_contact(ctx: StageContext) -> dict:
     """Rough contact: FE → BEM coupling check, global solve and element k_n for every surface."""
-    import numpy as np
-
-    from . import multiscale as ms
     c = ctx.case
     r = c.roughness
     rm = _reduced_model(ctx)
@@ -76,16 +79,14 @@ def stage_contact(ctx: StageContext) -> dict:
     # zero roughness must give back the smooth FE pressure (equivalent macro gap)
     flat = ms.rough_contact(setup, 0.0, r.corr_length, r.seed, comm=ctx.comm, stiffness=False, tol=1e-12)
     coupling_err = float(np.abs(flat.pressure - setup.p_s).max() / setup.p_s.max())
-    rqs = sorted(set(r.rq_um) | {r.v_rq_um})
     surfaces = {}
-    for rq in rqs:
+    for rq in sorted(set(r.rq_um) | {r.v_rq_um}):
         surfaces[rq] = ms.rough_contact(setup, rq, r.corr_length, r.seed, hardness=r.hardness,
                                         comm=ctx.comm)
-        ctx.print(f"[fe-joint] contact: Rq = {rq:g} µm: contact fraction "
+        ctx.print(f"[fe-joint] contact: Rq = {rq_label(rq)} µm: contact fraction "
                   f"{100 * surfaces[rq].contact_fraction:.2f} %, {surfaces[rq].iterations} iterations, "
                   f"k_n mean {np.mean(surfaces[rq].kn):.3g} N/mm³")
     # smooth-ms: FE loads, k_n on patches of the nearly smooth realization
-    import time
     t0 = time.perf_counter()
     z_smooth = ms.surface(setup, r.smooth_rq_um, r.corr_length, r.seed)
     kn_smooth = ms.element_normal_stiffness(setup, z_smooth, setup.n0_fe, comm=ctx.comm)
@@ -98,43 +99,39 @@ def stage_contact(ctx: StageContext) -> dict:
     return {
         "coupling_rel_error": coupling_err, "pressure_interpolation_scale": setup.pressure_scale,
         "grid": r.grid, "patch": r.patch, "patch_side_mm": setup.side,
-        "surfaces": {f"{rq:g}": {"contact_fraction": s.contact_fraction, "iterations": s.iterations,
-                                 "kn_mean": float(np.mean(s.kn)), "kn_max": float(np.max(s.kn)),
-                                 "load_scale": s.load_scale,
-                                 "loaded_elements": int(np.sum(s.n0 > 0)), "seconds": s.seconds}
-                     for rq, s in surfaces.items()},
+        "surfaces": {rq_label(rq): _surface_summary(s) for rq, s in surfaces.items()},
         "smooth": {"rq_um": r.smooth_rq_um, "kn_mean": float(np.mean(kn_smooth)),
                    "kn_max": float(np.max(kn_smooth)), "seconds": t_smooth},
     }
 
 
-REGISTRY["contact"] = stage_contact
+def _curve_summary(cr) -> dict:
+    return {"config": cr.config, "level_index": cr.level_index, "rq_um": cr.key.rq_um,
+            "level": cr.level, "peak_hz": cr.peak_hz, "peak_amplitude": cr.peak_amplitude,
+            "dissipated": cr.dissipated, "n_active": cr.n_active, "n_nonlinear": cr.n_nonlinear,
+            "n_points": cr.n_points, "seconds": cr.seconds,
+            "status_counts": np.bincount(cr.status, minlength=5).tolist(),
+            "unstable_points": int(np.sum(~cr.stable))}
 
 
 def stage_dynamics(ctx: StageContext) -> dict:
     """FRFs of every configuration and level, the v3 fixed point and the Rq sweep (HBM)."""
-    import numpy as np
-
-    from . import multiscale as ms
-    from . import study
-    from .dynamics import CurveResult
-    from .joint import stuck_modes
     c = ctx.case
     rm = _reduced_model(ctx)
     setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
     surfaces, extra = ms.load_surfaces(ctx.path("contact", "surfaces.npz"))
-    joints = study.fixed_joints(setup, surfaces, extra["kn_smooth"], c)
+    joints = fixed_joints(setup, surfaces, extra["kn_smooth"], c)
     f_lin = {name: stuck_modes(rm.K, rm.M, rm.pair_dofs, j).frequency for name, j in joints.items()}
-    levels, level_info = study.choose_levels(rm, joints["baseline"], c)
+    levels, level_info = choose_levels(rm, joints["baseline"], c)
     inp = study.StudyInputs(rm=rm, setup=setup, surfaces=surfaces, kn_smooth=extra["kn_smooth"],
-                            joints=joints, levels=levels, f_lin=f_lin, case=c)
+                            joints=joints, levels=levels, f_lin=f_lin, case=c,
+                            settings=SweepSettings.from_case(c))
     folder = ctx.path("dynamics")
     # finished jobs are reused only for the same inputs and the same contact output
-    study.prepare_folder(folder, f"{ctx.keys['dynamics']}/{ctx.runs.get('contact')}", ctx.rank,
-                         ctx.comm)
+    prepare_folder(folder, f"{ctx.keys['dynamics']}/{ctx.runs.get('contact')}", ctx.rank, ctx.comm)
     jobs = study.jobs_for(c, levels)
     # the small-excitation check: far below first slip the FRF peak is the stuck linear mode
-    tiny = study.Job(name="check-linear@tiny", kind="curve", config="baseline", level_index=0)
+    tiny = study.Job(kind="curve", config="baseline", level_index=None)
     inp_tiny = study.StudyInputs(**{**inp.__dict__, "levels": [level_info["first_slip"] * 1e-3]})
     ctx.print(f"[fe-joint] dynamics: levels {', '.join(f'{x:.3g}' for x in levels)} N "
               f"(macroslip estimate {level_info['macroslip']:.3g} N), {len(jobs)} jobs")
@@ -143,70 +140,63 @@ def stage_dynamics(ctx: StageContext) -> dict:
         from tqdm import tqdm
         bar = tqdm(total=len(jobs) + 1, desc="dynamics", unit="job")
     tick = (lambda job: bar.update(1)) if bar is not None else None
-    study.run_jobs(inp_tiny, [tiny], folder, ctx.comm, tick)
-    study.run_jobs(inp, jobs, folder, ctx.comm, tick)
+    run_jobs(lambda job: study.run_job(inp_tiny, job), study.write_job, [tiny], folder, ctx.comm, tick)
+    run_jobs(lambda job: study.run_job(inp, job), study.write_job, jobs, folder, ctx.comm, tick)
     if bar is not None:
         bar.close()
     summary: dict = {"levels": levels, "level_info": level_info, "f_lin": f_lin, "curves": {},
                      "v3": {}}
     if ctx.rank == 0:
-        import json
-        for f in sorted(folder.glob("*.npz")):
-            if f.name.endswith(".arrays.npz"):
-                continue
-            cr = CurveResult.load(f)
-            summary["curves"][f.stem] = {
-                "config": cr.config, "level": cr.level, "peak_hz": cr.peak_hz,
-                "peak_amplitude": cr.peak_amplitude, "dissipated": cr.dissipated,
-                "n_active": cr.n_active, "n_nonlinear": cr.n_nonlinear, "n_points": cr.n_points,
-                "seconds": cr.seconds, "status_counts": np.bincount(cr.status, minlength=5).tolist(),
-                "unstable_points": int(np.sum(~cr.stable))}
+        curves = load_curves(folder)
+        summary["curves"] = {k.name: _curve_summary(cr) for k, cr in curves.items()}
         for f in sorted(folder.glob("v3-*.json")):
             summary["v3"][f.stem] = json.loads(f.read_text())
-        t = summary["curves"]["check-linear@tiny"]
-        summary["linear_peak_rel_error"] = abs(t["peak_hz"] - f_lin["baseline"]) / f_lin["baseline"]
+        t = curves[CurveKey("baseline", None)]
+        summary["linear_peak_rel_error"] = abs(t.peak_hz - f_lin["baseline"]) / f_lin["baseline"]
     if ctx.comm is not None:
         summary = ctx.comm.bcast(summary, root=0)
     return summary
 
 
-REGISTRY["dynamics"] = stage_dynamics
+def stage_speed(ctx: StageContext) -> dict:
+    """Speed against error: BEM grid, HBM harmonics and samples (skipped unless dynamics.speed_study).
+
+    Writes ``speed/speed_error.json`` ({table title: [rows]}); it never touches the study's curves.
+    """
+    from ..study import speed_error
+    c = ctx.case
+    tables: dict = {}
+    if c.dynamics.speed_study and ctx.rank == 0:
+        rm = _reduced_model(ctx)
+        dyn = (ctx.summaries.get("dynamics") or {})
+        levels = dyn.get("levels", [])
+        grids = (64, 128, 256, 512) if c.roughness.grid >= 256 else (32, 64, c.roughness.grid * 2)
+        tables[f"global BEM grid (Rq = {rq_label(c.roughness.v_rq_um)} µm)"] = speed_error.bem_grid(rm, c, grids)
+        mid = len(levels) // 2
+        curves = load_curves(ctx.path("dynamics"))
+        cr = curves.get(CurveKey("baseline", mid))
+        if cr is not None:
+            setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
+            joint = joint_baseline(setup, c.contact.k_ref)
+            hs = (1, 3, 5) if c.dynamics.harmonics <= 3 else (1, 3, 5, 7)
+            tables.update(speed_error.hbm_knobs(rm, joint, cr.level, c.contact.mu,
+                                                2 * np.pi * cr.peak_hz, harmonics=hs))
+    if ctx.rank == 0:
+        ctx.path("speed").mkdir(parents=True, exist_ok=True)
+        tmp = ctx.path("speed", "speed_error.json.tmp")
+        tmp.write_text(json.dumps(tables, indent=1, default=float))
+        tmp.replace(ctx.path("speed", "speed_error.json"))
+    return {"tables": sorted(tables), "skipped": not c.dynamics.speed_study}
 
 
 def stage_report(ctx: StageContext) -> dict:
-    """Figures, report.md, summary.json; plus the speed-against-error tables (rank 0)."""
-    from . import speed_error
-    from .report import write_report
-    from .stages import read_manifest
-    c = ctx.case
-    summaries = {s: (read_manifest(ctx.out, s) or {}).get("summary", {}) for s in
-                 ("mesh", "fe", "contact", "dynamics")}
-    summary = None
+    """Figures, report.md, summary.json from the artifacts of the earlier stages (rank 0)."""
+    from ..report import write_report
     if ctx.rank == 0:
-        import numpy as np
-
-        from . import multiscale as ms
-        from .dynamics import CurveResult
-        rm = _reduced_model(ctx)
-        speed = None
-        dyn = summaries["dynamics"]
-        mid = len(dyn["levels"]) // 2
-        base = ctx.path("dynamics", f"baseline@L{mid}.npz")
-        if c.dynamics.speed_study:
-            grids = (64, 128, 256, 512) if c.roughness.grid >= 256 else (32, 64, c.roughness.grid * 2)
-            speed = {"global BEM grid (Rq = %g µm)" % c.roughness.v_rq_um: speed_error.bem_grid(rm, c, grids)}
-        if c.dynamics.speed_study and base.exists():
-            cr = CurveResult.load(base)
-            setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
-            joint = ms.joint_baseline(setup, c.contact.k_ref)
-            hs = (1, 3, 5) if c.dynamics.harmonics <= 3 else (1, 3, 5, 7)
-            speed.update(speed_error.hbm_knobs(rm, joint, cr.level, c.contact.mu,
-                                               2 * np.pi * cr.peak_hz, harmonics=hs))
-        summary = write_report(ctx.out, c, summaries, speed)
+        write_report(ctx.out, ctx.case)
         ctx.print(f"[fe-joint] report: {ctx.path('report.md')}")
-    if ctx.comm is not None:
-        summary = ctx.comm.bcast(summary, root=0)
     return {"written": ["report.md", "summary.json", "figures"]}
 
 
-REGISTRY["report"] = stage_report
+REGISTRY = {"mesh": stage_mesh, "fe": stage_fe, "contact": stage_contact,
+            "dynamics": stage_dynamics, "speed": stage_speed, "report": stage_report}

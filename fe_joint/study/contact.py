@@ -1,32 +1,15 @@
-"""The multiscale study: FE preload → rough BEM → friction elements → HBM, configurations of the paper.
-
-Configurations (paper Table 1, DESIGN §4.6):
-
-============  ==========================  ==============================  ==========================
-name          N0, gap                     k_n                             k_t
-============  ==========================  ==============================  ==========================
-baseline      smooth FE preload           k_ref                           k_ref
-smooth-ms     smooth FE preload           BEM patches, Rq = smooth_rq     = k_n
-v1            BEM, rough (Rq = v_rq)      k_ref                           k_ref
-v2            BEM, rough                  BEM patches at N0               Mindlin ratio · k_n
-v3            BEM, rough                  BEM patches at cycle-mean N     BEM loop at resonance
-============  ==========================  ==============================  ==========================
-
-v3 is a fixed point: it starts from v2, computes the FRF at the chosen level, takes every element's
-cycle-mean normal load and tangential force amplitude at resonance, recomputes k_n and k_t on the
-element's patch (k_t = slope of the hysteresis loop at load reversal, paper Fig. 4) and repeats
-until the resonance frequency and the peak change by less than ``contact.kt_tol`` (the paper did
-one pass). Elements without real contact in their cell get k_n = 0, as in the paper: they carry no
-force and are left out of the dynamics (model only what the analysis needs).
+"""Rough contact of the interface: FE preload → BEM grid → global rough solve → element loads and
+patch stiffnesses (k_n at a load; k_n and k_t at a cycle-mean load and tangential amplitude).
 
 All functions here are collective when given a communicator: BEM patches are split over ranks
-(each patch is solved independently, so the split does not change its result) and FRF curves are
-distributed one per rank.
+(each patch is solved independently, so the split does not change its result).
 """
 from __future__ import annotations
 
+import json
+import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -34,9 +17,6 @@ from contact_bem import (ElasticHalfSpace, extract_patches, gaussian_surface, ma
                          mindlin_ratio, patch_normal_stiffness, patch_stiffness, solve_normal)
 
 from .interface import InterfaceGrid, element_loads, interface_grid, patch_side, smooth_fields
-from .joint import JointModel
-
-CONFIGURATIONS = ("baseline", "smooth-ms", "v1", "v2", "v3")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -197,58 +177,25 @@ def element_loop_stiffness(setup: InterfaceSetup, z: np.ndarray, n_mean: np.ndar
     return _gather_concat(ps.k_n, comm), _gather_concat(ps.k_t, comm)
 
 
-# ---------------------------------------------------------------------------------------------
-# Configurations
-# ---------------------------------------------------------------------------------------------
-def joint_baseline(setup: InterfaceSetup, k_ref: float) -> JointModel:
-    ne = len(setup.area)
-    return JointModel("baseline", n0=setup.n0_fe, gap=setup.gap_fe, kn=np.full(ne, k_ref),
-                      kt=np.full(ne, k_ref), area=setup.area)
-
-
-def joint_smooth_ms(setup: InterfaceSetup, smooth: SurfaceContact, comm=None) -> JointModel:
-    """FE loads; k_n from the nearly smooth surface's patches at the FE element loads; k_t = k_n."""
-    kn = element_normal_stiffness(setup, smooth.z, setup.n0_fe, comm=comm)
-    return JointModel("smooth-ms", n0=setup.n0_fe, gap=setup.gap_fe, kn=kn, kt=kn.copy(),
-                      area=setup.area, rq_um=smooth.rq_um)
-
-
-def joint_v1(setup: InterfaceSetup, sc: SurfaceContact, k_ref: float) -> JointModel:
-    ne = len(setup.area)
-    return JointModel("v1", n0=sc.n0, gap=sc.gap_el, kn=np.full(ne, k_ref), kt=np.full(ne, k_ref),
-                      area=setup.area, rq_um=sc.rq_um)
-
-
-def joint_v2(setup: InterfaceSetup, sc: SurfaceContact, name: str = "v2") -> JointModel:
-    return JointModel(name, n0=sc.n0, gap=sc.gap_el, kn=sc.kn, kt=sc.kt_mindlin, area=setup.area,
-                      rq_um=sc.rq_um)
-
-
-def active(joint: JointModel) -> np.ndarray:
-    """Elements the dynamics needs: those with a contact stiffness (k_n, k_t > 0)."""
-    return (joint.kn > 0) & (joint.kt > 0)
-
-
 def save_surfaces(path, surfaces: dict[float, SurfaceContact], extra: dict | None = None) -> None:
-    """Write surface contacts (keyed by Rq in µm) and extra arrays to one ``.npz`` (rank 0)."""
-    import json
-    from dataclasses import asdict
+    """Write surface contacts and extra arrays to one ``.npz`` (rank 0).
+
+    Surface i is stored under ``surface<i>/<field>``; its Rq is the ``rq_um`` field inside, so
+    :func:`load_surfaces` keys the surfaces by the stored value, never by a formatted name.
+    """
     out = {}
-    for rq, sc in surfaces.items():
+    for i, sc in enumerate(surfaces.values()):
         for k, v in asdict(sc).items():
-            out[f"{rq:g}/{k}"] = np.asarray(json.dumps(v) if k == "seconds" else v)
+            out[f"surface{i}/{k}"] = np.asarray(json.dumps(v) if k == "seconds" else v)
     for k, v in (extra or {}).items():
         out[f"extra/{k}"] = np.asarray(v)
     tmp = str(path) + ".tmp.npz"
     np.savez(tmp, **out)
-    import os
     os.replace(tmp, path)
 
 
 def load_surfaces(path) -> tuple[dict[float, SurfaceContact], dict]:
     """Read what :func:`save_surfaces` wrote: ({rq_um: SurfaceContact}, extra arrays)."""
-    import json
-    from dataclasses import fields
     names = {f.name for f in fields(SurfaceContact)}
     raw: dict[str, dict] = {}
     extra = {}
@@ -260,11 +207,11 @@ def load_surfaces(path) -> tuple[dict[float, SurfaceContact], dict]:
                 continue
             raw.setdefault(head, {})[k] = d[key]
     surfaces = {}
-    for head, kw in raw.items():
-        kw = {k: v for k, v in kw.items() if k in names}
+    for head in sorted(raw, key=lambda h: int(h.removeprefix("surface"))):
+        kw = {k: v for k, v in raw[head].items() if k in names}
         kw["seconds"] = json.loads(str(kw["seconds"]))
         for k in ("rq_um", "contact_fraction", "load_scale"):
             kw[k] = float(kw[k])
         kw["iterations"] = int(kw["iterations"])
-        surfaces[float(head)] = SurfaceContact(**kw)
+        surfaces[kw["rq_um"]] = SurfaceContact(**kw)
     return surfaces, extra

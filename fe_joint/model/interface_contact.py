@@ -1,4 +1,4 @@
-"""Bolt preload with unilateral frictionless node-to-node contact on the matched lap pairs.
+"""Bolt preload contact on the condensed interface (numpy): active set, pressure recovery, scaling.
 
 Method (DESIGN §4.2):
 
@@ -27,7 +27,6 @@ Method (DESIGN §4.2):
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,7 +34,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from fe_joint.convergence import ConvergenceError
+from ..errors import ConvergenceError
 
 OPEN, TIED, CLOSED_UNTIED, CLOSED_VERTEX = 0, 1, 2, 3
 
@@ -310,116 +309,3 @@ def preload_from_condensed(S: np.ndarray, f_unit: np.ndarray, layout, data, prel
     force = p * area
     force *= preload_force / force.sum()
     return s, sol, force / area, force
-
-
-def solve_preload(fe, material, preload: float, comm=None, out_dir: str | None = None,
-                  problem=None, condensation=None) -> PreloadResult:
-    """Bolt preload of the joint with interface contact (the whole chain on a distributed mesh).
-
-    Args:
-        fe: JointFE / ResonatorFE (mesh, cell_tags, data).
-        material: elasticity.Material.
-        preload: target bolt force, N (> 0).
-        comm: unused (the mesh carries its communicator); kept for the public signature.
-        out_dir: if given, write ``preload.xdmf`` (displacement, von Mises, interface pressure) and
-            ``preload_pressure.png`` there (rank 0 writes the PNG).
-        problem: an already assembled JointProblem (else assembled here).
-        condensation: an existing BoundaryCondensation on ``problem.layout.dofs`` (else built here).
-
-    Returns:
-        PreloadResult (identical on every rank).
-    """
-    from fe_joint.condensation import BoundaryCondensation
-    from fe_joint.joint_setup import assemble_joint, shank_axial_force
-
-    if not (np.isfinite(preload) and preload > 0):
-        raise ValueError(f"preload must be a finite bolt force > 0 N, got {preload}")
-    if problem is None:
-        problem = assemble_joint(fe, material, with_mass=False)
-    own = condensation is None
-    if own:
-        condensation = BoundaryCondensation(problem.K, None, problem.layout.dofs)
-        S = condensation.condense()["K_BB"]
-    else:
-        S = condensation.condensed["K_BB"]
-    f_b = condensation.condense_load(problem.f_eig)
-    s, sol, pressure, force = preload_from_condensed(S, f_b, problem.layout, fe.data, preload)
-    f_full = problem.f_eig.copy()
-    f_full.scale(s)
-    u_vec = condensation.expand(sol.u, f_full)
-    import dolfinx
-    u = dolfinx.fem.Function(problem.V, name="displacement")
-    u.vector.array[:] = u_vec.array
-    u.x.scatter_forward()
-    shank = shank_axial_force(problem, u, s)
-    gap = np.maximum(-sol.relative[:, 2], 0.0)
-    gap[sol.status != OPEN] = 0.0
-    res = PreloadResult(bolt_force=float(force.sum()), eigenstrain=float(s), shank_force=float(shank),
-                        pair_normal_force=force, pair_pressure=pressure, pair_gap=gap,
-                        pair_raw_force=sol.force, pair_status=sol.status, support_reactions=sol.reactions,
-                        u_boundary=sol.u, iterations=sol.iterations, n_toggled=sol.n_toggled,
-                        displacement=u)
-    if out_dir is not None:
-        write_preload_fields(problem, res, out_dir)
-    if own:
-        condensation.destroy()
-    return res
-
-
-def write_preload_fields(problem, res: PreloadResult, out_dir: str) -> None:
-    """Write displacement, von Mises stress and interface pressure to XDMF and a pressure PNG."""
-    import dolfinx
-    from dolfinx.io import XDMFFile
-
-    from fe_joint.elasticity import von_mises_dg0
-    from fe_joint.joint_setup import SHANK_MARKER
-    from fe_joint.joint_setup import global_node_dofs
-
-    comm = problem.V.mesh.comm
-    if comm.rank == 0:
-        os.makedirs(out_dir, exist_ok=True)
-    comm.barrier()
-    mesh = problem.V.mesh
-    vm = von_mises_dg0(res.displacement, problem.material, res.eigenstrain, SHANK_MARKER, problem.fe.cell_tags)
-    # interface pressure as a P2 scalar field on both lap faces
-    Q = dolfinx.fem.FunctionSpace(mesh, ("Lagrange", 2))
-    pres = dolfinx.fem.Function(Q, name="interface_pressure")
-    pairs = np.asarray(problem.fe.data.pair_nodes)
-    gd = global_node_dofs(problem.V, pairs.ravel())[:, 0] // 3
-    lo, hi = Q.dofmap.index_map.local_range
-    vals = np.repeat(res.pair_pressure, 2)
-    mine = (gd >= lo) & (gd < hi)
-    pres.x.array[gd[mine] - lo] = vals[mine]
-    pres.x.scatter_forward()
-    # P2 fields on the tet10 mesh: XDMF stores them at the geometry nodes (exact nodal values)
-    u1, p1 = res.displacement, pres
-    path = os.path.join(out_dir, "preload.xdmf")
-    with XDMFFile(comm, path, "w") as xf:
-        xf.write_mesh(mesh)
-        xf.write_function(u1)
-        xf.write_function(p1)
-        xf.write_function(vm)
-    if comm.rank == 0:
-        plot_pressure_map(problem.fe.data, res.pair_pressure, os.path.join(out_dir, "preload_pressure.png"))
-
-
-def plot_pressure_map(data, pressure: np.ndarray, path: str) -> None:
-    """PNG map of the interface pressure over the lap face (tri6 split into four tri3)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.tri import Triangulation
-
-    tri6 = lap_triangles(data)
-    sub = np.vstack([tri6[:, [0, 3, 5]], tri6[:, [3, 1, 4]], tri6[:, [5, 4, 2]], tri6[:, [3, 4, 5]]])
-    xyz = np.asarray(data.pair_xyz)
-    fig, ax = plt.subplots(figsize=(5.5, 4.5))
-    tc = ax.tripcolor(Triangulation(xyz[:, 0], xyz[:, 1], sub), pressure, shading="gouraud", cmap="viridis")
-    fig.colorbar(tc, ax=ax, label="contact pressure (MPa)")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (mm)")
-    ax.set_ylabel("y (mm)")
-    ax.set_title(f"preload interface pressure, total {np.sum(pressure * np.asarray(data.pair_area)):.0f} N")
-    fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)

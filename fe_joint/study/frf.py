@@ -9,7 +9,7 @@ tangential force amplitude and loops — as plain arrays (:class:`CurveResult`, 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from types import SimpleNamespace
 from pathlib import Path
 
@@ -17,7 +17,8 @@ import numpy as np
 
 from hbm import ConvergenceError, FrictionContacts, HarmonicBalance, LinearStructure
 
-from .joint import JointModel
+from ..model.joint import JointModel
+from .artifacts import CurveKey
 
 OPEN = 4   # status code of elements left out of the dynamics (hbm's OPEN)
 
@@ -28,6 +29,31 @@ class SweepIncomplete(ConvergenceError):
     def __init__(self, message: str) -> None:
         RuntimeError.__init__(self, message)
         self.residual = float("nan")
+
+
+@dataclass(frozen=True)
+class SweepSettings:
+    """The harmonic-balance settings of every FRF of a study, built once from the case.
+
+    Attributes:
+        harmonics: highest harmonic H.
+        samples: AFT samples per period.
+        band: (low, high) sweep band as fractions of the stuck linear frequency.
+        max_points: cap on continuation points per curve.
+        mu: friction coefficient.
+    """
+    harmonics: int
+    samples: int
+    band: tuple[float, float]
+    max_points: int
+    mu: float
+
+    @classmethod
+    def from_case(cls, case) -> "SweepSettings":
+        """From the validated case's ``[dynamics]`` and ``[contact]`` sections."""
+        d = case.dynamics
+        return cls(harmonics=d.harmonics, samples=d.samples, band=(d.band[0], d.band[1]),
+                   max_points=d.max_points, mu=case.contact.mu)
 
 
 def structure(rm) -> LinearStructure:
@@ -69,6 +95,17 @@ class CurveResult:
     n_points: int
     n_active: int
     n_nonlinear: int             # elements slipping or separating at the peak
+    level_index: int = -1        # which study level (-1: the small-excitation check)
+    rq_um: float = float("nan")  # Rq of the surface behind the joint, µm (NaN: none)
+
+    @property
+    def key(self) -> CurveKey:
+        """The curve's typed key (stored inside its file)."""
+        return CurveKey.from_fields(self.config, self.level_index, self.rq_um)
+
+    def with_key(self, key: CurveKey) -> "CurveResult":
+        """A copy labelled with ``key`` (configuration, level index, Rq)."""
+        return replace(self, **key.to_fields())
 
     def save(self, path: Path) -> None:
         tmp = Path(str(path) + ".tmp.npz")
@@ -81,9 +118,9 @@ class CurveResult:
             kw = {k: d[k] for k in d.files}
         for k in ("config",):
             kw[k] = str(kw[k])
-        for k in ("level", "peak_hz", "peak_amplitude", "seconds"):
+        for k in ("level", "peak_hz", "peak_amplitude", "seconds", "rq_um"):
             kw[k] = float(kw[k])
-        for k in ("newton_iterations", "n_points", "n_active", "n_nonlinear"):
+        for k in ("newton_iterations", "n_points", "n_active", "n_nonlinear", "level_index"):
             kw[k] = int(kw[k])
         return cls(**kw)
 
@@ -93,21 +130,17 @@ class CurveResult:
         return float(self.energy.sum())
 
 
-def frf(rm, joint: JointModel, level: float, mu: float, f_lin: float, band: tuple[float, float],
-        harmonics: int, samples: int, max_points: int) -> CurveResult:
+def frf(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSettings) -> CurveResult:
     """FRF of one configuration at one excitation level, and the joint state at its peak.
 
     Args:
         rm: ReducedModel.
         joint: the configuration's element parameters.
         level: excitation amplitude on mass A in x, N.
-        mu: friction coefficient.
         f_lin: stuck linear frequency of the configuration, Hz (sets the band).
-        band: (low, high) fractions of f_lin swept.
-        harmonics, samples: HBM harmonics and AFT samples per period.
-        max_points: cap on continuation points.
+        settings: harmonics, samples, band (fractions of f_lin), max_points, μ.
     """
-    return frf_with_peak(rm, joint, level, mu, f_lin, band, harmonics, samples, max_points)[0]
+    return frf_with_peak(rm, joint, level, f_lin, settings)[0]
 
 
 #: Tolerances of the FRF sweeps: (Newton, GMRES) relative; first the fast pair, then hbm's defaults.
@@ -119,18 +152,17 @@ def frf(rm, joint: JointModel, level: float, mu: float, f_lin: float, band: tupl
 SWEEP_TOLERANCES = ((1e-7, 1e-8), (1e-9, 1e-11))
 
 
-def _setup(rm, joint: JointModel, level: float, mu: float, harmonics: int, samples: int,
+def _setup(rm, joint: JointModel, level: float, settings: SweepSettings,
            tols: tuple[float, float] = SWEEP_TOLERANCES[0]):
-    c, act = contacts(rm, joint, mu)
-    hb = HarmonicBalance(structure(rm), c, harmonics=harmonics, samples=samples, tol=tols[0],
-                         krylov_tol=tols[1])
+    c, act = contacts(rm, joint, settings.mu)
+    hb = HarmonicBalance(structure(rm), c, harmonics=settings.harmonics, samples=settings.samples,
+                         tol=tols[0], krylov_tol=tols[1])
     force = np.zeros(rm.K.shape[0])
     force[rm.excitation_dof] = level
     return hb, force, act
 
 
-def frf_with_peak(rm, joint: JointModel, level: float, mu: float, f_lin: float,
-                  band: tuple[float, float], harmonics: int, samples: int, max_points: int):
+def frf_with_peak(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSettings):
     """:func:`frf`, also returning the contact harmonics at the peak, (ne, 3, 2H+1) over all pairs
     (zeros for inactive ones): the warm start of :func:`peak_near` on a slightly changed joint.
 
@@ -138,15 +170,17 @@ def frf_with_peak(rm, joint: JointModel, level: float, mu: float, f_lin: float,
     (``SWEEP_TOLERANCES``) before the failure is reported."""
     fast, strict = SWEEP_TOLERANCES
     try:
-        return _sweep(rm, joint, level, mu, f_lin, band, harmonics, samples, max_points, fast)
+        return _sweep(rm, joint, level, f_lin, settings, fast)
     except ConvergenceError:
-        return _sweep(rm, joint, level, mu, f_lin, band, harmonics, samples, max_points, strict)
+        return _sweep(rm, joint, level, f_lin, settings, strict)
 
 
-def _sweep(rm, joint, level, mu, f_lin, band, harmonics, samples, max_points, tols):
+def _sweep(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSettings,
+           tols: tuple[float, float]):
     t0 = time.perf_counter()
-    hb, force, act = _setup(rm, joint, level, mu, harmonics, samples, tols)
-    w0, w1 = 2 * np.pi * f_lin * band[0], 2 * np.pi * f_lin * band[1]
+    hb, force, act = _setup(rm, joint, level, settings, tols)
+    max_points = settings.max_points
+    w0, w1 = 2 * np.pi * f_lin * settings.band[0], 2 * np.pi * f_lin * settings.band[1]
     # step guards: at most 1/50 of the band per step, and at most 25 % change of the response
     # amplitude per step (hbm's defaults, 1/100 and 10 %, doubled the points for the same peak
     # to 0.01 % on the quick model)
@@ -182,8 +216,8 @@ PEAK_WINDOW = 0.03
 PEAK_DROP = 0.01
 
 
-def peak_near(rm, joint: JointModel, level: float, mu: float, f_guess: float, guess: np.ndarray,
-              harmonics: int, samples: int, max_points: int = 80) -> tuple[CurveResult, np.ndarray]:
+def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.ndarray,
+              settings: SweepSettings, max_points: int = 80) -> tuple[CurveResult, np.ndarray]:
     """The resonance peak of ``joint`` near ``f_guess``, without sweeping the whole band.
 
     For the v3 fixed point, whose joint changes little from pass to pass: Newton at ``f_guess``
@@ -201,11 +235,12 @@ def peak_near(rm, joint: JointModel, level: float, mu: float, f_guess: float, gu
         ConvergenceError when Newton fails — callers fall back to :func:`frf_with_peak`.
     """
     t0 = time.perf_counter()
-    hb, force, act = _setup(rm, joint, level, mu, harmonics, samples)
+    hb, force, act = _setup(rm, joint, level, settings)
     start = None
     if guess is not None:
-        if guess.shape[1:] != (3, 2 * harmonics + 1):
-            raise ValueError(f"guess must have shape (ne, 3, {2 * harmonics + 1}), got {guess.shape}")
+        n_h = 2 * settings.harmonics + 1
+        if guess.shape[1:] != (3, n_h):
+            raise ValueError(f"guess must have shape (ne, 3, {n_h}), got {guess.shape}")
         start = SimpleNamespace(contact=guess[act])   # elements new to the set start at rest
     w = 2 * np.pi * f_guess
     dof = rm.response_dof

@@ -9,10 +9,7 @@ in any partition (:func:`original_node_dofs`).
 """
 from __future__ import annotations
 
-import json
-import time
-from dataclasses import asdict, dataclass
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 import ufl
@@ -21,8 +18,7 @@ from mpi4py import MPI
 import dolfinx
 from dolfinx import cpp as _cpp
 from dolfinx.io import gmshio
-from geometry.resonator import (LAP_A, MARKER_NAMES, ResonatorMesh, ResonatorParams,
-                                build_resonator, nominal_interface_area)
+from geometry.resonator import ResonatorMesh, ResonatorParams, build_resonator, nominal_interface_area
 
 _GMSH_TET = {4: 4, 10: 11}  # nodes per cell -> gmsh element type
 
@@ -214,109 +210,3 @@ def mesh_statistics(fe: ResonatorFE) -> dict:
         "volumes": {k: float(v) for k, v in _volumes(fe).items()},
         "build_time_s": float(fe.data.build_time),
     }
-
-
-def _exterior_faces(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex triangles of the boundary of a tet mesh and the cell each belongs to."""
-    t = cells[:, :4]
-    loc = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-    faces = t[:, loc].reshape(-1, 3)
-    owner = np.repeat(np.arange(len(t)), 4)
-    key = np.sort(faces, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    ext = cnt[inv] == 1
-    return faces[ext], owner[ext]
-
-
-def _plot(data: ResonatorMesh, path: Path) -> None:
-    """geometry.png: side view (x–z) of the parts and a plan view of lap face A with the pairs."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import PolyCollection
-    from matplotlib.tri import Triangulation
-
-    faces, owner = _exterior_faces(data.cells)
-    x = data.points
-    colors = {1: "tab:blue", 2: "tab:orange", 3: "tab:gray", 4: "dimgray", 5: "black"}
-    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(13, 6), gridspec_kw={"width_ratios": [1.2, 1]})
-    # side view from -y: draw faces back to front (painter's order by y)
-    order = np.argsort(-x[faces].mean(axis=1)[:, 1])
-    polys = x[faces[order]][:, :, [0, 2]]
-    fc = [colors[int(m)] for m in data.cell_markers[owner[order]]]
-    ax0.add_collection(PolyCollection(polys, facecolors=fc, edgecolors="k", linewidths=0.1))
-    ax0.set_xlim(x[:, 0].min() - 2, x[:, 0].max() + 2)
-    ax0.set_ylim(x[:, 2].min() - 2, x[:, 2].max() + 2)
-    ax0.set_aspect("equal")
-    ax0.set_xlabel("x [mm]")
-    ax0.set_ylabel("z [mm]")
-    for m, c in colors.items():
-        ax0.plot([], [], "s", color=c, label=MARKER_NAMES[m])
-    e = x[data.excitation_node]
-    ax0.plot(e[0], e[2], "r*", ms=14, label="excitation / response")
-    ax0.legend(loc="lower right", fontsize=8)
-    ax0.set_title(f"resonator: {len(x)} nodes, {len(data.cells)} tets")
-
-    lap = data.facets[data.facet_markers == LAP_A][:, :3]
-    used, tri = np.unique(lap, return_inverse=True)
-    triang = Triangulation(x[used, 0], x[used, 1], tri.reshape(-1, 3))
-    ax1.triplot(triang, color="0.6", lw=0.5)
-    sc = ax1.scatter(data.pair_xyz[:, 0], data.pair_xyz[:, 1], c=data.pair_area, s=14,
-                     cmap="viridis")
-    fig.colorbar(sc, ax=ax1, label="tributary area [mm²]", shrink=0.8)
-    ax1.set_aspect("equal")
-    ax1.set_xlabel("x [mm]")
-    ax1.set_ylabel("y [mm]")
-    ax1.set_title(f"lap interface: {data.n_pairs} pairs, Σ area = {data.pair_area.sum():.2f} mm²")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def write_mesh_artifacts(fe: ResonatorFE, out_dir: Path) -> dict:
-    """Write mesh.xdmf (+ .h5: mesh, cell and facet tags), pairs.csv, geometry.png, mesh.json.
-
-    Collective (XDMF is written in parallel; csv, png and json by rank 0).
-
-    Args:
-        fe: the distributed resonator.
-        out_dir: output folder (created).
-
-    Returns:
-        :func:`mesh_statistics` plus ``files`` (names written).
-    """
-    out_dir = Path(out_dir)
-    comm = fe.mesh.comm
-    if comm.rank == 0:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    comm.barrier()
-    stats = mesh_statistics(fe)
-    with dolfinx.io.XDMFFile(comm, str(out_dir / "mesh.xdmf"), "w") as f:
-        f.write_mesh(fe.mesh)
-        fe.mesh.topology.create_connectivity(fe.mesh.topology.dim - 1, fe.mesh.topology.dim)
-        f.write_meshtags(fe.cell_tags)
-        f.write_meshtags(fe.facet_tags)
-    files = ["mesh.xdmf", "mesh.h5", "pairs.csv", "geometry.png", "mesh.json"]
-    if comm.rank == 0:
-        d = fe.data
-        table = np.column_stack([np.arange(d.n_pairs), d.pair_xyz, d.pair_area, d.pair_nodes])
-        np.savetxt(out_dir / "pairs.csv", table, delimiter=",",
-                   fmt=["%d", "%.12g", "%.12g", "%.12g", "%.12g", "%d", "%d"],
-                   header="index,x,y,z,area,node_a,node_b", comments="")
-        _plot(d, out_dir / "geometry.png")
-        meta = {**stats, "params": asdict(d.params), "excitation_node": int(d.excitation_node),
-                "response_node": int(d.response_node),
-                "excitation_xyz": d.points[d.excitation_node].tolist()}
-        (out_dir / "mesh.json").write_text(json.dumps(meta, indent=2))
-    comm.barrier()
-    stats["files"] = files
-    return stats
-
-
-if __name__ == "__main__":  # quick look: python -m fe_joint.mesh OUT_DIR
-    import sys
-    t0 = time.perf_counter()
-    fe_ = load_resonator(ResonatorParams())
-    s = write_mesh_artifacts(fe_, Path(sys.argv[1] if len(sys.argv) > 1 else "mesh_out"))
-    if MPI.COMM_WORLD.rank == 0:
-        print(json.dumps(s, indent=2), f"\ntotal {time.perf_counter() - t0:.1f} s")

@@ -16,8 +16,8 @@ import time
 
 import numpy as np
 
-from . import multiscale as ms
-from .dynamics import contacts, structure
+from . import contact as ms
+from .frf import contacts, structure
 
 
 def bem_grid(rm, case, grids=(64, 128, 256, 512)) -> list[dict]:

@@ -14,7 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .dynamics import CurveResult
+from ..case.schema import CONFIGURATIONS
+from ..model.reduced_model import ReducedModel
+from ..pipeline.runner import read_manifest
+from ..study.artifacts import CurveKey, load_curves, rq_label, v3_job_name
+from ..study.contact import load_surfaces
+from ..study.frf import CurveResult
 
 STATUS_NAMES = ("stuck", "stick–slip", "gross slip", "partly open", "open")
 PAPER = {  # the paper's numbers for the side-by-side table
@@ -55,12 +60,21 @@ def _grid_image(ax, field, extent, title, label, cmap="viridis", log=False):
     ax.figure.colorbar(im, ax=ax, shrink=0.8).set_label(label)
 
 
-def write_report(out: Path, case, summaries: dict, speed: dict | None = None) -> dict:
-    """Draw the figures, write report.md and summary.json. Returns the summary dict."""
+def write_report(out: Path, case) -> dict:
+    """Draw the figures, write report.md and summary.json from a run's artifacts.
+
+    Args:
+        out: the run's folder (stage manifests, fe/, contact/, dynamics/, speed/).
+        case: the validated case of the run.
+    Returns:
+        the summary dict written to summary.json.
+    """
     plt = _plt()
-    from .multiscale import load_surfaces
-    from .reduced_model import ReducedModel
     out = Path(out)
+    summaries = {s: (read_manifest(out, s) or {}).get("summary", {}) for s in
+                 ("mesh", "fe", "contact", "dynamics")}
+    sp = out / "speed" / "speed_error.json"
+    speed = json.loads(sp.read_text()) if sp.exists() else None
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
     rm = ReducedModel.load(str(out / "fe" / "reduced_model.h5"))
@@ -72,18 +86,15 @@ def write_report(out: Path, case, summaries: dict, speed: dict | None = None) ->
     g = case.geometry
     hole = g.hole_diameter
     extent = (-g.overlap / 2, g.overlap / 2, -g.plate_width / 2, g.plate_width / 2)
-    curves = {f.stem: CurveResult.load(f) for f in sorted((out / "dynamics").glob("*.npz"))
-              if not f.name.endswith(".arrays.npz")}
+    curves = load_curves(out / "dynamics")
     rv = case.roughness.v_rq_um
     mid = len(levels) // 2
 
     def curve(cfg: str, i: int) -> CurveResult | None:
-        name = f"v3-rq{rv:g}@L{i}" if cfg == "v3" else f"{cfg}@L{i}"
-        return curves.get(name)
+        return curves.get(CurveKey("v3", i, rv) if cfg == "v3" else CurveKey(cfg, i))
 
     configs = list(case.dynamics.configurations)
-    colors = dict(zip(("baseline", "smooth-ms", "v1", "v2", "v3"),
-                      ("k", "tab:blue", "tab:orange", "tab:green", "tab:red")))
+    colors = dict(zip(CONFIGURATIONS, ("k", "tab:blue", "tab:orange", "tab:green", "tab:red")))
 
     # --- FRFs per level (Figs. 11, 16) --------------------------------------------------------
     fig, axes = plt.subplots(1, len(levels), figsize=(5 * len(levels), 4), squeeze=False)
@@ -106,14 +117,14 @@ def write_report(out: Path, case, summaries: dict, speed: dict | None = None) ->
     plt.close(fig)
 
     # --- FRFs vs Rq (Fig. 21) -------------------------------------------------------------------
-    rq_curves = sorted(((float(k.split("rq")[1].split("@")[0]), cr) for k, cr in curves.items()
-                        if k.startswith("v3-rq") and k.endswith(f"@L{mid}")), key=lambda t: t[0])
+    rq_curves = sorted(((k.rq_um, cr) for k, cr in curves.items()
+                        if k.config == "v3" and k.level_index == mid), key=lambda t: t[0])
     base_mid = curve("baseline", mid)
     fig, ax = plt.subplots(figsize=(6, 4))
     if base_mid is not None:
         ax.plot(base_mid.omega_hz, base_mid.amplitude, "k", label="baseline (smooth)")
     for rq, cr in rq_curves:
-        ax.plot(cr.omega_hz, cr.amplitude, label=f"v3, Rq = {rq:g} µm")
+        ax.plot(cr.omega_hz, cr.amplitude, label=f"v3, Rq = {rq_label(rq)} µm")
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("mass A amplitude [mm]")
     ax.set_title(f"roughness sweep at {levels[mid]:.3g} N", fontsize=9)
@@ -129,7 +140,7 @@ def write_report(out: Path, case, summaries: dict, speed: dict | None = None) ->
     for k, rq in enumerate(rqs):
         sc = surfaces[rq]
         _grid_image(axes[0, k + 1], sc.pressure, extent,
-                    f"Rq = {rq:g} µm: contact {100 * sc.contact_fraction:.1f} %", "MPa (log)",
+                    f"Rq = {rq_label(rq)} µm: contact {100 * sc.contact_fraction:.1f} %", "MPa (log)",
                     cmap="jet", log=True)
     fig.tight_layout()
     fig.savefig(figs / "pressure_morphology.png", dpi=110)
@@ -137,10 +148,10 @@ def write_report(out: Path, case, summaries: dict, speed: dict | None = None) ->
 
     # --- stiffness maps (Figs. 8, 14) -------------------------------------------------------------
     sv = surfaces[rv]
-    v3arr = out / "dynamics" / f"v3-rq{rv:g}.arrays.npz"
+    v3arr = out / "dynamics" / f"{v3_job_name(rv)}.arrays.npz"
     kt_v3 = np.load(v3arr)["kt"] if v3arr.exists() else None
     kn_v3 = np.load(v3arr)["kn"] if v3arr.exists() else sv.kn
-    panels = [("k_n smooth-ms [N/mm³]", extra["kn_smooth"]), (f"k_n Rq={rv:g} µm (v3) [N/mm³]", kn_v3),
+    panels = [("k_n smooth-ms [N/mm³]", extra["kn_smooth"]), (f"k_n Rq={rq_label(rv)} µm (v3) [N/mm³]", kn_v3),
               ("k_t Mindlin (v2) [N/mm³]", sv.kt_mindlin)]
     if kt_v3 is not None:
         panels.append(("k_t from loops (v3) [N/mm³]", kt_v3))
@@ -215,7 +226,7 @@ def write_report(out: Path, case, summaries: dict, speed: dict | None = None) ->
         keq["v3"] = {"kn": k_eq(kn_v3), "kt": k_eq(kt_v3)}
     keq_rq = {}
     for rq in rqs:
-        f = out / "dynamics" / f"v3-rq{rq:g}.arrays.npz"
+        f = out / "dynamics" / f"{v3_job_name(rq)}.arrays.npz"
         if f.exists():
             a = np.load(f)
             keq_rq[rq] = {"kn": k_eq(a["kn"]), "kt": k_eq(a["kt"])}
@@ -266,9 +277,9 @@ def write_report(out: Path, case, summaries: dict, speed: dict | None = None) ->
         "stuck_frequency_hz": dyn["f_lin"],
         "levels_N": levels, "macroslip_estimate_N": dyn["level_info"]["macroslip"],
         "levels_over_macroslip": [lv / dyn["level_info"]["macroslip"] for lv in levels],
-        "contact_fraction": {f"{rq:g}": surfaces[rq].contact_fraction for rq in rqs},
+        "contact_fraction": {rq_label(rq): surfaces[rq].contact_fraction for rq in rqs},
         "kn_smooth_mean": float(np.mean(extra["kn_smooth"])), "kn_smooth_max": float(np.max(extra["kn_smooth"])),
-        "k_eq": keq, "k_eq_vs_rq": {f"{q:g}": v for q, v in keq_rq.items()},
+        "k_eq": keq, "k_eq_vs_rq": {rq_label(q): v for q, v in keq_rq.items()},
         "peaks": peaks, "v3": {k: {"converged": v.get("converged"), "passes": len(v.get("history", [])),
                                    "history": v.get("history")} for k, v in dyn.get("v3", {}).items()},
         "coupling_rel_error": ct.get("coupling_rel_error"),
@@ -323,8 +334,8 @@ def _markdown(case, s, levels, configs, curve, rqs, surfaces, speed) -> str:
           "|---|---|---|---|---|---|---|"]
     for rq in rqs:
         sc = surfaces[rq]
-        kq = s["k_eq_vs_rq"].get(f"{rq:g}", {})
-        L.append(f"| {rq:g} | {100 * sc.contact_fraction:.2f} | {PAPER['contact_fraction'].get(rq, '–')} | "
+        kq = s["k_eq_vs_rq"].get(rq_label(rq), {})
+        L.append(f"| {rq_label(rq)} | {100 * sc.contact_fraction:.2f} | {PAPER['contact_fraction'].get(rq, '–')} | "
                  f"{np.mean(sc.kn):.3g} | {np.max(sc.kn):.3g} | {_fmt(kq.get('kn'), '{:.3g}')} | "
                  f"{_fmt(kq.get('kt'), '{:.3g}')} |")
     L += ["", f"Smooth multiscale (Rq = {case.roughness.smooth_rq_um:g} µm) k_n: mean {s['kn_smooth_mean']:.3g}, "

@@ -13,7 +13,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 from slepc4py import SLEPc
 
-from fe_joint.convergence import ConvergenceError
+from ..errors import ConvergenceError
 
 
 @dataclass

@@ -18,7 +18,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fe_joint.modal import mumps_cholesky
+from .modal import mumps_cholesky
 
 
 class BoundaryCondensation:
