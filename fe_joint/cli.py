@@ -1,10 +1,11 @@
-"""Command line: ``fe-joint run [CASE.toml] [--out DIR] [--preset P] [--stages ...]`` and
-``fe-joint check CASE.toml``.
+"""Command line: ``fe-joint run [CASE.toml] [--out DIR] [--preset P] [--stages ...] [--force]``,
+``fe-joint check CASE.toml`` and ``fe-joint report DIR``.
 
 Bad input (case file, options) ends with one line ``fe-joint: error: …`` naming the key and
-exit status 2, before anything is written; ``--debug`` shows the traceback instead. A solver that
-does not converge ends with its residual and exit status 3. Under ``mpirun`` every rank runs the
-stages and only rank 0 prints and writes.
+exit status 2, before anything is written; a solver that does not converge ends with its residual
+and exit status 3; anything else is a bug: exit 1, "internal error: …" (``fe_joint.errors``).
+``--debug`` (before or after the subcommand) shows the traceback instead. Under ``mpirun`` every
+rank runs the stages and only rank 0 prints and writes.
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from pathlib import Path
 
 from .case import PRESETS, load_case
 from .errors import EXIT_INPUT, CaseError
+from .logs import configure_logging
 from .pipeline.runner import STAGES
 
 
@@ -26,7 +28,10 @@ class _Parser(argparse.ArgumentParser):
 def _parser() -> argparse.ArgumentParser:
     p = _Parser(prog="fe-joint", description="Multiscale nonlinear dynamics of a bolted lap joint "
                 "with rough contact (dolfinx FE → FFT-BEM → harmonic balance).")
-    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    p.add_argument("--debug", action="store_true", help="show tracebacks and fe-joint's debug log")
+    # the subcommands' --debug must not reset a --debug given before them (argparse copies a
+    # subparser's defaults over the namespace), hence SUPPRESS
+    dbg = {"action": "store_true", "default": argparse.SUPPRESS, "help": "show tracebacks"}
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     r = sub.add_parser("run", help="run the pipeline on a case (default: the embedded resonator case)")
     r.add_argument("case", nargs="?", help="case file (TOML); default: the embedded resonator study")
@@ -38,11 +43,15 @@ def _parser() -> argparse.ArgumentParser:
                         "or are run), or 'all'")
     r.add_argument("--force", action="store_true", help="rerun the requested stages even when cached")
     r.add_argument("--no-progress", action="store_true", help="no progress bars")
-    r.add_argument("--debug", action="store_true", help="show tracebacks")
+    r.add_argument("--debug", **dbg)
     c = sub.add_parser("check", help="validate a case file and print it with all defaults filled in")
     c.add_argument("case", help="case file (TOML)")
     c.add_argument("--preset", choices=list(PRESETS), default=None)
-    c.add_argument("--debug", action="store_true", help="show tracebacks")
+    c.add_argument("--debug", **dbg)
+    rp = sub.add_parser("report", help="write the report of a finished run again from its artifacts "
+                        "(no dolfinx needed)")
+    rp.add_argument("out", help="the run's output folder")
+    rp.add_argument("--debug", **dbg)
     return p
 
 
@@ -71,9 +80,8 @@ def _fail(msg: str, code: int) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``fe-joint`` console script; returns the exit status."""
-    import logging
-    logging.basicConfig(level=logging.WARNING)   # FFCx's JIT logs every compile at INFO otherwise
     args = _parser().parse_args(argv)
+    configure_logging(args.debug)
     try:
         return _dispatch(args)
     except Exception as e:  # turned into one line unless --debug
@@ -85,6 +93,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _dispatch(args: argparse.Namespace) -> int:
+    if args.command == "report":
+        return _report(Path(args.out))
     if args.command == "check":
         from .case import case_to_toml
         case = load_case(args.case, preset=args.preset)
@@ -98,11 +108,24 @@ def _dispatch(args: argparse.Namespace) -> int:
 
     from .pipeline.runner import run_stages
     from .pipeline.stages import REGISTRY
-    ctx = run_stages(case, out, stages, REGISTRY, comm=MPI.COMM_WORLD,
+    ctx = run_stages(case, out, stages, REGISTRY, comm=MPI.COMM_WORLD, force=args.force,
                      progress=not args.no_progress)
     if MPI.COMM_WORLD.rank == 0:
         print(f"[fe-joint] done: {out}", flush=True)
     del ctx
+    return 0
+
+
+def _report(out: Path) -> int:
+    """``fe-joint report DIR``: the report of a finished run, from its artifacts and its case."""
+    from .case import load_case
+    from .pipeline.runner import CASE_FILE
+    from .report import write_report
+    case_file = out / CASE_FILE
+    if not case_file.is_file():
+        raise CaseError(f"report: {str(out)!r} is not a finished run's folder (no {CASE_FILE})")
+    write_report(out, load_case(case_file))
+    print(f"[fe-joint] report: {out / 'report.md'}", flush=True)
     return 0
 
 

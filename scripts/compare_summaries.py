@@ -11,36 +11,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 
-#: keys whose values are wall-clock times
-TIMING_KEYS = frozenset({"seconds", "timings_s", "wall_time", "time [s]", "cost"})
-
-
-def differences(a, b, path: str = "") -> list[tuple[float, str, object, object]]:
-    """(relative difference, path, a, b) for every leaf that differs (inf: structure differs)."""
-    out = []
-    if isinstance(a, dict) and isinstance(b, dict):
-        for k in sorted(set(a) | set(b)):
-            if k in TIMING_KEYS:
-                continue
-            if k not in a or k not in b:
-                out.append((math.inf, f"{path}/{k}", a.get(k, "<missing>"), b.get(k, "<missing>")))
-                continue
-            out += differences(a[k], b[k], f"{path}/{k}")
-    elif isinstance(a, list) and isinstance(b, list):
-        if len(a) != len(b):
-            return [(math.inf, f"{path} (length)", len(a), len(b))]
-        for i, (x, y) in enumerate(zip(a, b)):
-            out += differences(x, y, f"{path}[{i}]")
-    elif isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
-        if a != b and not (math.isnan(a) and math.isnan(b)):
-            scale = max(abs(a), abs(b))
-            out.append((abs(a - b) / scale if scale else math.inf, path, a, b))
-    elif a != b:
-        out.append((math.inf, path, a, b))
-    return out
+from fe_joint.report.compare import differences
 
 
 def main(argv: list[str] | None = None) -> int:

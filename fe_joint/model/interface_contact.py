@@ -271,11 +271,11 @@ class PreloadResult:
 def preload_from_condensed(S: np.ndarray, f_unit: np.ndarray, layout, data, preload_force: float):
     """Solve the condensed contact problem for a unit eigenstrain and scale it to the preload.
 
+    ``preload_force`` (N, > 0) is checked by the public entry :func:`fe_joint.fe.preload.solve_preload`.
+
     Returns:
         (scale = eigenstrain, ContactSolution scaled, pair_pressure, pair_normal_force).
     """
-    if not (np.isfinite(preload_force) and preload_force > 0):
-        raise ValueError(f"preload_force must be a finite force > 0 N, got {preload_force}")
     xyz = np.asarray(data.pair_xyz, dtype=float)
     support = choose_321_support(xyz, layout.pair_a)
     sol = solve_interface_contact(S, f_unit, layout.pair_a, layout.pair_b, support)

@@ -123,14 +123,6 @@ class ReducedModel:
         """Number of interface pairs."""
         return len(self.pair_area)
 
-    def with_damping(self, damping_ratio: float) -> "ReducedModel":
-        """A copy with C recomputed for another modal damping ratio."""
-        import copy
-        C, _ = modal_damping_matrix(self.K, self.M, damping_ratio)
-        out = copy.copy(self)
-        out.C, out.damping_ratio = C, float(damping_ratio)
-        return out
-
     def tied_frequencies(self, k_normal: float, k_tangential: float | None = None, n: int = 12) -> np.ndarray:
         """Free–free frequencies with every closed pair tied by springs, Hz (stuck-joint check).
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from ..case import Case
+from ..case import Case, case_to_toml
 
 #: the dynamics settings the study's curves depend on (not ``speed_study``: the speed stage's switch)
 _DYNAMICS_CURVES = tuple(f"dynamics.{k}" for k in
@@ -43,6 +43,8 @@ STAGE_INPUTS: dict[str, tuple[tuple[str, ...], str]] = {
                 "dynamics"), "2"),
 }
 STAGES: tuple[str, ...] = tuple(STAGE_INPUTS)
+#: the effective case of a run, written into its folder (``fe-joint report DIR`` reads it)
+CASE_FILE = "case.toml"
 
 
 @dataclass
@@ -121,6 +123,7 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
     rank = comm.rank if comm is not None else 0
     if rank == 0:
         (out / "stages").mkdir(parents=True, exist_ok=True)
+        (out / CASE_FILE).write_text(case_to_toml(case))
     if comm is not None:
         comm.barrier()
     keys = stage_keys(case)
