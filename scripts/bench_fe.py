@@ -80,7 +80,7 @@ def degree_worker(size: str, degree: int) -> None:
     from mpi4py import MPI
 
     from fe_joint.case import Material
-from fe_joint.fe.elasticity import assemble_mass, assemble_stiffness, vector_space
+    from fe_joint.fe.elasticity import assemble_mass, assemble_stiffness, vector_space
     from fe_joint.fe.assembly import global_node_dofs
     from fe_joint.fe.mesh import load_resonator
     from fe_joint.fe.modal import free_modes

@@ -15,15 +15,14 @@ Run: ``.venv/bin/python scripts/demo_multiscale.py [--rq 10]``
 # ## 1. FE: preload and reduced model (coarse mesh)
 # %%
 import argparse
-import dataclasses
 import tempfile
 
 import numpy as np
 
 from fe_joint.study import contact as ms
+from fe_joint.study.configurations import joint_v2
 from fe_joint.case import load_case
 from fe_joint.study.frf import contacts, structure
-from fe_joint.case import Material
 from fe_joint.model.joint import JointModel, stuck_modes
 from fe_joint.fe.reduction import build_reduced_model
 from hbm import HarmonicBalance
@@ -32,7 +31,7 @@ ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 ap.add_argument("--rq", type=float, default=10.0, help="composite RMS roughness, µm")
 args = ap.parse_args()
 case = load_case(preset="quick")
-rm = build_reduced_model(case.geometry, Material(**dataclasses.asdict(case.material)),
+rm = build_reduced_model(case.geometry, case.material,
                          case.preload.bolt_force, case.reduction.damping_ratio,
                          case.reduction.cutoff_hz, out_dir=tempfile.mkdtemp(), n_full_elastic=0)
 print(f"reduced model: {rm.n_dofs} DOFs, {rm.n_pairs} pairs")
@@ -51,7 +50,7 @@ print(f"Rq = {args.rq:g} µm: real contact {100 * sc.contact_fraction:.2f} % of 
 # %% [markdown]
 # ## 3. Dynamics with k_t by Mindlin (the paper's 'v2')
 # %%
-joint = ms.joint_v2(setup, sc)
+joint = joint_v2(setup, sc)
 f_lin = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency
 level = 20.0                                    # N on mass A, in x
 force = np.zeros(rm.n_dofs)

@@ -12,14 +12,12 @@ Run: ``.venv/bin/python scripts/demo_preload.py`` (or under ``mpirun -n 2``)
 # ## Mesh
 # The coarse resonator of the ``quick`` preset (≈ 200 pairs, ≈ 23k P2 DOFs).
 # %%
-import dataclasses
 import tempfile
 
 import numpy as np
 from mpi4py import MPI
 
 from fe_joint.case import load_case
-from fe_joint.case import Material
 from fe_joint.fe.reduction import build_reduced_model
 
 comm = MPI.COMM_WORLD
@@ -39,7 +37,7 @@ def say(*a):
 # %%
 out = tempfile.mkdtemp() if comm.rank == 0 else None
 out = comm.bcast(out, root=0)
-rm = build_reduced_model(case.geometry, Material(**dataclasses.asdict(case.material)),
+rm = build_reduced_model(case.geometry, case.material,
                          case.preload.bolt_force, case.reduction.damping_ratio,
                          case.reduction.cutoff_hz, comm=comm, out_dir=out, n_full_elastic=4)
 say(f"reduced model: {rm.n_dofs} DOFs ({rm.n_boundary} interface/excitation DOFs + modes)")

@@ -2,7 +2,6 @@
 rebuilt without them."""
 from __future__ import annotations
 
-import json
 import os
 import pkgutil
 import subprocess

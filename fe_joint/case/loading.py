@@ -45,8 +45,8 @@ def _type_name(t: Any) -> str:
 
 
 def _check_value(key: str, value: Any, f: dataclasses.Field) -> Any:
-    """Type- and range-check one value; returns it converted (int → float where a float is due)."""
-    md = f.metadata
+    """Type-check one value; returns it converted (int → float where a float is due). Ranges are
+    checked by the section dataclass when it is made."""
     ftype = f.type if not isinstance(f.type, str) else {"float": float, "int": int, "str": str,
                                                         "bool": bool, "list": list, "Any": Any}.get(f.type, Any)
     if ftype is float:

@@ -18,7 +18,8 @@ from mpi4py import MPI
 import dolfinx
 from dolfinx import cpp as _cpp
 from dolfinx.io import gmshio
-from geometry.resonator import ResonatorMesh, ResonatorParams, build_resonator, nominal_interface_area
+from geometry.resonator import (MARKER_NAMES, ResonatorMesh, ResonatorParams, build_resonator,
+                                nominal_interface_area)
 
 _GMSH_TET = {4: 4, 10: 11}  # nodes per cell -> gmsh element type
 

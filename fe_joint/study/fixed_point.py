@@ -10,7 +10,6 @@ from hbm import ConvergenceError
 
 from ..model.joint import JointModel, stuck_modes
 from . import contact as ms
-from .artifacts import v3_job_name
 from .configurations import joint_v2
 from .frf import frf, frf_with_peak, peak_near
 
@@ -37,6 +36,54 @@ def _aitken(x: np.ndarray, r: np.ndarray, r_prev: np.ndarray | None, w_prev: flo
     return float(np.clip(-w_prev * float(r_prev @ d) / dd, V3_RELAX_MIN, V3_RELAX_MAX))
 
 
+def _find_peak(inp, joint: JointModel, level: float, lin, prev, f_lin_prev, state):
+    """One pass's peak: a local search from the previous peak (``prev`` not None), else — or if
+    that fails — a full sweep.
+
+    Returns:
+        (CurveResult, contact harmonics at the peak, "local" | "sweep", why the local search failed).
+    """
+    why = None
+    if prev is not None:
+        try:
+            # the peak moves about as the stuck frequency does; start just above it
+            f_start = prev.peak_hz * lin.frequency / f_lin_prev * (1 + PEAK_START_MARGIN)
+            curve, state = peak_near(inp.rm, joint, level, f_start, state, inp.settings)
+            return curve, state, "local", None
+        except ConvergenceError as e:
+            why = " ".join(str(e).split())
+    curve, state = frf_with_peak(inp.rm, joint, level, lin.frequency, inp.settings)
+    return curve, state, "sweep", why
+
+
+def _relaxed_update(inp, sc, joint: JointModel, curve, r_prev, relax: float):
+    """The next joint: patch k_n, k_t at the peak's loads, relaxed by Aitken's factor.
+
+    Only elements in contact at the mean load are updated; an element the BEM finds out of
+    contact leaves the joint (as the plain update would).
+
+    Returns:
+        (next JointModel, residual r = F(x) − x for the next Aitken step, relaxation used).
+    """
+    loaded = sc.n0 > 0
+    n_mean = np.where(loaded, np.maximum(curve.mean_normal, 0.0), 0.0)
+    kn_new, kt_new = ms.element_loop_stiffness(inp.setup, sc.z, n_mean, curve.q_amp,
+                                               inp.case.contact.mu)
+    keep = loaded & (kn_new > 0) & (kt_new > 0)
+    x = np.concatenate([joint.kn[keep], joint.kt[keep]])
+    r = np.concatenate([kn_new[keep], kt_new[keep]]) - x
+    if r_prev is not None and r_prev.shape != r.shape:
+        r_prev = None
+    relax = _aitken(x, r, r_prev, relax)
+    # a relaxed step keeps every stiffness positive (ω ≤ V3_RELAX_MAX may extrapolate)
+    x = np.maximum(x + relax * r, 0.1 * x)
+    kn, kt = np.zeros_like(joint.kn), np.zeros_like(joint.kt)
+    kn[keep], kt[keep] = x[:keep.sum()], x[keep.sum():]
+    nxt = JointModel(joint.name, n0=sc.n0, gap=sc.gap_el, kn=kn, kt=kt, area=inp.setup.area,
+                     rq_um=sc.rq_um)
+    return nxt, r, relax
+
+
 def run_v3(inp, rq: float, level: float) -> dict:
     """The v3 fixed point on the surface of Rq = ``rq``: FRF → loads → BEM k_n, k_t → FRF …
 
@@ -45,18 +92,21 @@ def run_v3(inp, rq: float, level: float) -> dict:
     patch's hysteresis loop under the tangential force amplitude at resonance, relaxed by
     Aitken's factor (the plain iteration was seen to oscillate, ±1.5 % in peak amplitude on
     Rq = 15 µm, and a fixed factor 0.5 to creep, 5–6 passes), and finds the new peak by a short
-    continuation from the previous one (:func:`~fe_joint.dynamics.peak_near`; a full sweep if
+    continuation from the previous one (:func:`~fe_joint.study.frf.peak_near`; a full sweep if
     that fails). It stops when the peak frequency and amplitude change by less than
     ``contact.kt_tol``; the converged joint then gets its full FRF (whose polished peak is the
     last pass's, recorded in the history as a check).
 
+    Args:
+        inp: the study's inputs (StudyInputs).
+        rq: Rq of the surface, µm (a key of ``inp.surfaces``).
+        level: excitation amplitude, N.
     Returns:
         dict with the final ``curve`` (CurveResult), the pass-0 curve ``first``, ``kn``, ``kt``,
         per-pass ``history``, ``converged`` and ``f_lin``.
     """
     c = inp.case
     sc = inp.surfaces[rq]
-    loaded = sc.n0 > 0
     joint = joint_v2(inp.setup, sc, name="v3")
     history = []
     prev = first = None
@@ -66,18 +116,8 @@ def run_v3(inp, rq: float, level: float) -> dict:
     for p in range(c.contact.kt_max_passes + 1):
         t0 = time.perf_counter()
         lin = stuck_modes(inp.rm.K, inp.rm.M, inp.rm.pair_dofs, joint)
-        search, why = "sweep", None
-        if p > 0:
-            try:
-                # the peak moves about as the stuck frequency does; start just above it
-                f_start = (prev.peak_hz * lin.frequency / history[-1]["f_lin"]
-                           * (1 + PEAK_START_MARGIN))
-                curve, state = peak_near(inp.rm, joint, level, f_start, state, inp.settings)
-                search = "local"
-            except ConvergenceError as e:
-                why = " ".join(str(e).split())
-        if search == "sweep":
-            curve, state = frf_with_peak(inp.rm, joint, level, lin.frequency, inp.settings)
+        curve, state, search, why = _find_peak(inp, joint, level, lin, prev,
+                                               history[-1]["f_lin"] if history else None, state)
         if p == 0:
             first = curve
         change = (None if prev is None else
@@ -93,24 +133,8 @@ def run_v3(inp, rq: float, level: float) -> dict:
         if p == c.contact.kt_max_passes:
             break
         prev = curve
-        n_mean = np.where(loaded, np.maximum(curve.mean_normal, 0.0), 0.0)
-        kn_new, kt_new = ms.element_loop_stiffness(inp.setup, sc.z, n_mean, curve.q_amp, c.contact.mu)
-        # Aitken-relaxed update on the elements in contact at the mean load; an element the
-        # BEM finds out of contact leaves the joint (as the plain update would)
-        keep = loaded & (kn_new > 0) & (kt_new > 0)
-        x = np.concatenate([joint.kn[keep], joint.kt[keep]])
-        r = np.concatenate([kn_new[keep], kt_new[keep]]) - x
-        if r_prev is not None and r_prev.shape != r.shape:
-            r_prev = None
-        relax = _aitken(x, r, r_prev, relax)
-        r_prev = r
-        # a relaxed step keeps every stiffness positive (ω ≤ V3_RELAX_MAX may extrapolate)
-        x = np.maximum(x + relax * r, 0.1 * x)
+        joint, r_prev, relax = _relaxed_update(inp, sc, joint, curve, r_prev, relax)
         history[-1]["relaxation"] = relax
-        kn, kt = np.zeros_like(joint.kn), np.zeros_like(joint.kt)
-        kn[keep], kt[keep] = x[:keep.sum()], x[keep.sum():]
-        joint = JointModel(joint.name, n0=sc.n0, gap=sc.gap_el, kn=kn, kt=kt, area=inp.setup.area,
-                           rq_um=rq)
     final = curve
     if search == "local":
         final = frf(inp.rm, joint, level, lin.frequency, inp.settings)
