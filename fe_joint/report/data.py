@@ -1,0 +1,156 @@
+"""What the report reads: a run folder's artifacts gathered once into a :class:`ReportData`.
+
+Everything comes from files the earlier stages wrote (stage manifests, ``fe/reduced_model.h5``,
+``contact/surfaces.npz``, the curves and v3 records in ``dynamics/``, ``speed/speed_error.json``),
+never from the solvers, so the report runs without dolfinx, PETSc or the HBM solver.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..case import Case
+from ..model.reduced_model import ReducedModel
+from ..pipeline.runner import read_manifest
+from ..study.artifacts import CurveKey, load_curves, v3_job_name
+from ..study.contact import SurfaceContact, load_surfaces
+from ..study.frf import CurveResult
+
+#: the stages whose manifests the report reads (summary and wall time)
+STAGES_READ = ("mesh", "fe", "contact", "dynamics")
+
+#: the paper's numbers for the side-by-side tables (contact fraction in % per Rq in µm, N/mm³, s)
+PAPER = {
+    "contact_fraction": {1.0: 22.1, 10.0: 2.7, 15.0: 2.0},
+    "kn_smooth_mean": 6.6e4, "kn_smooth_max": 1.74e5,
+    "hbm_seconds": {"smooth": 13682, "Rq1": 6957, "Rq5": 6362, "Rq10": 6031, "Rq15": 5954},
+}
+
+
+@dataclass
+class ReportData:
+    """A finished run's artifacts, as the report uses them.
+
+    Attributes:
+        out: the run folder.
+        case: the validated case of the run.
+        summaries: stage → the ``summary`` of its manifest ({} when the stage has none).
+        stage_seconds: stage → wall time from its manifest, s (stages without one are left out).
+        rm: the reduced model (pair coordinates in mm, tributary areas in mm²).
+        surfaces: Rq in µm → the rough contact of that surface.
+        extra: the smooth arrays saved beside the surfaces (``kn_smooth`` N/mm³, ``p_s`` MPa, …).
+        curves: every finished FRF of ``dynamics/``.
+        v3_records: Rq in µm → the v3 fixed point's record (``history``, ``converged``, …).
+        v3_arrays: Rq in µm → the converged v3 stiffnesses {``kn``, ``kt``}, (ne,) N/mm³ each.
+        speed: the speed-against-error tables, None when the file is missing.
+    """
+    out: Path
+    case: Case
+    summaries: dict[str, dict]
+    stage_seconds: dict[str, float]
+    rm: ReducedModel
+    surfaces: dict[float, SurfaceContact]
+    extra: dict[str, np.ndarray]
+    curves: dict[CurveKey, CurveResult]
+    v3_records: dict[float, dict]
+    v3_arrays: dict[float, dict[str, np.ndarray]]
+    speed: dict | None
+
+    @property
+    def dynamics(self) -> dict:
+        """The dynamics stage's summary (levels, level_info, f_lin, linear_peak_rel_error)."""
+        return self.summaries["dynamics"]
+
+    @property
+    def levels(self) -> list[float]:
+        """Excitation levels of the study, N."""
+        return self.dynamics["levels"]
+
+    @property
+    def macroslip(self) -> float:
+        """Linear (stuck-joint) macroslip estimate, N."""
+        return self.dynamics["level_info"]["macroslip"]
+
+    @property
+    def mid(self) -> int:
+        """Index of the middle level (the Rq sweep's level)."""
+        return len(self.levels) // 2
+
+    @property
+    def top(self) -> int:
+        """Index of the highest level (resonance maps and loops)."""
+        return len(self.levels) - 1
+
+    @property
+    def configs(self) -> list[str]:
+        """The configurations the case compares, in the case's order."""
+        return list(self.case.dynamics.configurations)
+
+    @property
+    def v_rq(self) -> float:
+        """Rq of the v1/v2/v3 comparison surface, µm."""
+        return self.case.roughness.v_rq_um
+
+    @property
+    def rqs(self) -> list[float]:
+        """Rq of every contact surface, ascending, µm."""
+        return sorted(self.surfaces)
+
+    @property
+    def xy(self) -> np.ndarray:
+        """(ne, 2) in-plane coordinates of the friction elements, mm."""
+        return np.asarray(self.rm.pair_xyz)[:, :2]
+
+    @property
+    def area(self) -> np.ndarray:
+        """(ne,) tributary areas of the friction elements, mm²."""
+        return np.asarray(self.rm.pair_area)
+
+    def curve(self, config: str, level_index: int) -> CurveResult | None:
+        """The FRF of a configuration at a level (v3: on the comparison surface), None if absent."""
+        rq = self.v_rq if config == "v3" else None
+        return self.curves.get(CurveKey(config, level_index, rq))
+
+
+def _read_json(path: Path) -> dict | None:
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def _v3_files(dyn: Path, rqs: list[float]) -> tuple[dict[float, dict], dict[float, dict]]:
+    """The v3 records and converged stiffness arrays present in ``dyn`` for the given Rq (µm)."""
+    records, arrays = {}, {}
+    for rq in rqs:
+        rec = _read_json(dyn / f"{v3_job_name(rq)}.json")
+        if rec is not None:
+            records[rq] = rec
+        f = dyn / f"{v3_job_name(rq)}.arrays.npz"
+        if f.exists():
+            with np.load(f) as a:
+                arrays[rq] = {"kn": a["kn"], "kt": a["kt"]}
+    return records, arrays
+
+
+def load_report_data(out: Path, case: Case) -> ReportData:
+    """Read a run folder's artifacts.
+
+    Args:
+        out: the run's folder (``stages/``, ``fe/``, ``contact/``, ``dynamics/``, ``speed/``).
+        case: the validated case of the run.
+    Returns:
+        the artifacts as a ReportData.
+    """
+    out = Path(out)
+    manifests = {s: read_manifest(out, s) or {} for s in STAGES_READ}
+    surfaces, extra = load_surfaces(out / "contact" / "surfaces.npz")
+    records, arrays = _v3_files(out / "dynamics", sorted(surfaces))
+    return ReportData(
+        out=out, case=case,
+        summaries={s: m.get("summary", {}) for s, m in manifests.items()},
+        stage_seconds={s: m["seconds"] for s, m in manifests.items() if "seconds" in m},
+        rm=ReducedModel.load(str(out / "fe" / "reduced_model.h5")),
+        surfaces=surfaces, extra=extra, curves=load_curves(out / "dynamics"),
+        v3_records=records, v3_arrays=arrays,
+        speed=_read_json(out / "speed" / "speed_error.json"))

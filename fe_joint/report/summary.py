@@ -1,0 +1,83 @@
+"""``summary.json``: the run's numbers in one JSON dict (what ``scripts/compare_summaries.py`` reads)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..study.artifacts import rq_label, v3_job_name
+from ..study.frf import CurveResult
+from .data import ReportData
+from .stiffness import configuration_joints, k_eq_table, rq_joints
+
+#: the mesh statistics copied from the mesh stage
+MESH_KEYS = ("n_nodes", "n_cells", "n_dofs", "n_pairs")
+
+
+def curve_peak(cr: CurveResult) -> dict:
+    """The peak of one FRF and its cost.
+
+    Args:
+        cr: the curve.
+    Returns:
+        level N, peak_hz Hz, peak_amplitude mm, dissipated N·mm per cycle, n_nonlinear and
+        n_active elements, seconds s, n_points.
+    """
+    return {"level": cr.level, "peak_hz": cr.peak_hz, "peak_amplitude": cr.peak_amplitude,
+            "dissipated": cr.dissipated, "n_nonlinear": cr.n_nonlinear, "seconds": cr.seconds,
+            "n_points": cr.n_points, "n_active": cr.n_active}
+
+
+def v3_section(data: ReportData) -> dict:
+    """Per v3 fixed point (keyed by its record's file stem): converged, passes, per-pass history."""
+    return {v3_job_name(rq): {"converged": r.get("converged"), "passes": len(r.get("history", [])),
+                              "history": r.get("history")}
+            for rq, r in sorted(data.v3_records.items())}
+
+
+def timings(data: ReportData) -> dict:
+    """Wall times, s: per stage, the FE stage's parts and each contact surface's solves."""
+    fe, ct = data.summaries["fe"], data.summaries["contact"]
+    return {"stages": dict(data.stage_seconds), "fe": fe.get("timings", {}),
+            "contact": {k: v.get("seconds") for k, v in ct.get("surfaces", {}).items()}}
+
+
+def build_summary(data: ReportData) -> dict:
+    """The summary of a run.
+
+    Args:
+        data: the run's artifacts.
+    Returns:
+        JSON-able dict: frequencies in Hz, forces in N, stiffness in N/mm³, amplitudes in mm,
+        contact fractions as fractions of the usable nominal area, times in s.
+    """
+    fe, ct, dyn = data.summaries["fe"], data.summaries["contact"], data.dynamics
+    kn_smooth = data.extra["kn_smooth"]
+    summary = {
+        "case": data.case.name,
+        "mesh": {k: data.summaries["mesh"].get(k) for k in MESH_KEYS},
+        "first_elastic_hz_full_free": (fe.get("full_elastic_hz") or [None])[0],
+        "reduced_vs_full_max_rel_error": fe.get("max_rel_freq_error"),
+        "stuck_frequency_hz": dyn["f_lin"],
+        "levels_N": data.levels, "macroslip_estimate_N": data.macroslip,
+        "levels_over_macroslip": [lv / data.macroslip for lv in data.levels],
+        "contact_fraction": {rq_label(rq): data.surfaces[rq].contact_fraction for rq in data.rqs},
+        "kn_smooth_mean": float(np.mean(kn_smooth)), "kn_smooth_max": float(np.max(kn_smooth)),
+        "k_eq": k_eq_table(configuration_joints(data)),
+        "k_eq_vs_rq": {rq_label(q): v for q, v in k_eq_table(rq_joints(data)).items()},
+        "peaks": {k.name: curve_peak(cr) for k, cr in data.curves.items()},
+        "v3": v3_section(data),
+        "coupling_rel_error": ct.get("coupling_rel_error"),
+        "linear_peak_rel_error": dyn.get("linear_peak_rel_error"),
+        "timings_s": timings(data),
+    }
+    if data.speed:
+        summary["speed_vs_error"] = data.speed
+    return summary
+
+
+def write_summary(summary: dict, path: Path) -> Path:
+    """Write ``summary`` as indented JSON (numpy scalars as floats); returns ``path``."""
+    Path(path).write_text(json.dumps(summary, indent=1, default=float))
+    return Path(path)
