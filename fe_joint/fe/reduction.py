@@ -124,41 +124,15 @@ def craig_bampton(problem, cutoff_hz: float, damping_ratio: float = 1e-3, preloa
         timings["constraint_modes_s"] = time.perf_counter() - t
     t = time.perf_counter()
     nb, nm = layout.size, len(modes)
-    K = np.zeros((nb + nm, nb + nm))
-    M = np.zeros_like(K)
-    K[:nb, :nb] = blocks["K_BB"]
-    K[nb:, nb:] = np.diag((2 * np.pi * fm) ** 2)
-    M[:nb, :nb] = blocks["M_BB"]
-    M[nb:, :nb] = blocks["M_PB"]
-    M[:nb, nb:] = blocks["M_PB"].T
-    M[nb:, nb:] = np.eye(nm)
+    K, M = _reduced_matrices(blocks, fm)
     C, fr = modal_damping_matrix(K, M, zeta)
     timings["projection_s"] = time.perf_counter() - t
     npair = len(layout.pair_a)
     data = problem.fe.data
     frame = np.broadcast_to(np.eye(3), (npair, 3, 3)).copy()
-    if preload is not None:
-        pn, pp, pg, ps = (preload.pair_normal_force, preload.pair_pressure, preload.pair_gap,
-                          preload.pair_status)
-        meta_pre = dict(bolt_force=preload.bolt_force, shank_force=preload.shank_force,
-                        eigenstrain=preload.eigenstrain, n_closed=int(np.sum(preload.closed)),
-                        n_toggled=preload.n_toggled, active_set_iterations=preload.iterations,
-                        max_support_reaction=float(np.abs(preload.support_reactions).max()))
-    else:
-        pn, pp, pg, ps = np.zeros(npair), np.zeros(npair), np.zeros(npair), np.ones(npair, dtype=int)
-        meta_pre = {}
-    h = hashlib.sha256()
-    for arr in (data.points, data.cells, data.pair_nodes):
-        h.update(np.ascontiguousarray(arr).tobytes())
-    meta = dict(n_dofs_full=problem.n_dofs, n_pairs=npair, n_boundary=nb, n_modes=nm, cutoff_hz=cutoff_hz,
-                fixed_interface_frequencies=fm, mesh_sha256=h.hexdigest(), material=vars(problem.material)
-                if hasattr(problem.material, "__dict__") else str(problem.material),
-                n_ranks=problem.K.getComm().getSize(), **meta_pre)
-    if full_modes is not None:
-        meta["breathing_index"] = full_modes.breathing_index
-        meta["breathing_frequency_hz"] = (float(full_modes.frequencies[full_modes.breathing_index])
-                                          if full_modes.breathing_index >= 0 else None)
-        meta["n_rigid_full"] = full_modes.n_rigid
+    (pn, pp, pg, ps), meta_pre = _preload_fields(preload, npair)
+    meta = _metadata(problem, nb, nm, cutoff_hz, fm, full_modes)
+    meta.update(meta_pre)
     meta["timings"] = timings
     return ReducedModel(K=K, M=M, C=C, damping_ratio=zeta, dof_labels=dof_labels(layout, nm),
                         pair_xyz=np.asarray(data.pair_xyz, float), pair_area=np.asarray(data.pair_area, float),
@@ -168,6 +142,57 @@ def craig_bampton(problem, cutoff_hz: float, damping_ratio: float = 1e-3, preloa
                         response_dof=int(layout.extra["response"][0]),
                         full_frequencies=(full_modes.frequencies if full_modes is not None else np.zeros(0)),
                         reduced_frequencies=fr, n_boundary=nb, metadata=meta)
+
+
+def _reduced_matrices(blocks: dict, fm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Craig–Bampton K and M (boundary DOFs first, then the fixed-interface modes, mass-normalized).
+
+    Args:
+        blocks: condensed K_BB, M_BB and the modal coupling M_PB (modes × boundary).
+        fm: fixed-interface frequencies, Hz.
+    """
+    nb, nm = blocks["K_BB"].shape[0], len(fm)
+    K = np.zeros((nb + nm, nb + nm))
+    M = np.zeros_like(K)
+    K[:nb, :nb] = blocks["K_BB"]
+    K[nb:, nb:] = np.diag((2 * np.pi * fm) ** 2)
+    M[:nb, :nb] = blocks["M_BB"]
+    M[nb:, :nb] = blocks["M_PB"]
+    M[:nb, nb:] = blocks["M_PB"].T
+    M[nb:, nb:] = np.eye(nm)
+    return K, M
+
+
+def _preload_fields(preload, npair: int) -> tuple[tuple, dict]:
+    """Per-pair preload arrays (normal force N, pressure MPa, gap mm, status) and their metadata;
+    zeros and 'all closed' without a preload."""
+    if preload is None:
+        return (np.zeros(npair), np.zeros(npair), np.zeros(npair), np.ones(npair, dtype=int)), {}
+    meta = dict(bolt_force=preload.bolt_force, shank_force=preload.shank_force,
+                eigenstrain=preload.eigenstrain, n_closed=int(np.sum(preload.closed)),
+                n_toggled=preload.n_toggled, active_set_iterations=preload.iterations,
+                max_support_reaction=float(np.abs(preload.support_reactions).max()))
+    return (preload.pair_normal_force, preload.pair_pressure, preload.pair_gap,
+            preload.pair_status), meta
+
+
+def _metadata(problem, nb: int, nm: int, cutoff_hz: float, fm: np.ndarray, full_modes) -> dict:
+    """What the reduced model records about its origin: sizes, mesh hash, material, full modes."""
+    data = problem.fe.data
+    h = hashlib.sha256()
+    for arr in (data.points, data.cells, data.pair_nodes):
+        h.update(np.ascontiguousarray(arr).tobytes())
+    meta = dict(n_dofs_full=problem.n_dofs, n_pairs=len(problem.layout.pair_a), n_boundary=nb,
+                n_modes=nm, cutoff_hz=cutoff_hz, fixed_interface_frequencies=fm,
+                mesh_sha256=h.hexdigest(), material=vars(problem.material)
+                if hasattr(problem.material, "__dict__") else str(problem.material),
+                n_ranks=problem.K.getComm().getSize())
+    if full_modes is not None:
+        meta["breathing_index"] = full_modes.breathing_index
+        meta["breathing_frequency_hz"] = (float(full_modes.frequencies[full_modes.breathing_index])
+                                          if full_modes.breathing_index >= 0 else None)
+        meta["n_rigid_full"] = full_modes.n_rigid
+    return meta
 
 
 def build_reduced_model_from_fe(fe, material, preload_force: float, damping_ratio: float = 1e-3,
