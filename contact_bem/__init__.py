@@ -1,6 +1,6 @@
 """contact_bem — FFT boundary-element rough contact (normal, tangential partial slip, stiffness).
 
-Public API (DESIGN §5)::
+Public API (docs/design.md, "Public API")::
 
     from contact_bem import Grid, gaussian_surface, ElasticHalfSpace, solve_normal, solve_tangential
     grid = Grid(shape=(nx, ny), size=(lx, ly))

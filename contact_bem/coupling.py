@@ -1,13 +1,13 @@
 """FE → BEM coupling helpers: equivalent macro gap, patch extraction, element averages.
 
-Equivalent macro gap (DESIGN §4.4): the smooth FE solution gives the interface pressure p_s and gap
+Equivalent macro gap (docs/design.md, "Rough contact"): the smooth FE solution gives the interface pressure p_s and gap
 g_s. Taking the initial separation
 
     h0 = g_s − K*p_s − z
 
 (K the half-space operator, z the roughness heights, positive towards the other face) makes the BEM
 solve with total load Σ p_s·A reproduce p_s exactly when z = 0: the deformed gap is then
-h0 + K*p_s = g_s, zero where p_s > 0 and ≥ 0 elsewhere. DESIGN writes "+ z" with z the roughness'
+h0 + K*p_s = g_s, zero where p_s > 0 and ≥ 0 elsewhere. The original design map wrote "+ z" with z the roughness'
 contribution to the separation; with heights that is −z (identical in distribution for a Gaussian
 surface).
 """

@@ -1,6 +1,6 @@
 """Random Gaussian rough surfaces and their statistics.
 
-Convention (DESIGN §3): the correlation length λ is the lag at which the autocorrelation falls to
+Convention (docs/design.md, "Units and conventions"): the correlation length λ is the lag at which the autocorrelation falls to
 10 % of Rq², i.e. ``C(x, y) = Rq² · 10^(-(x/λx)² - (y/λy)²)`` (Patir 1978).
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Parametric gmsh (OCC) model of the two-mass bolted lap-joint resonator (DESIGN §4.1).
+"""Parametric gmsh (OCC) model of the two-mass bolted lap-joint resonator (docs/design.md, "The resonator").
 
 Pure gmsh + numpy: no dolfinx here, so the model can be built and checked on its own.
 Call :func:`build_resonator` on ONE MPI rank; the returned :class:`ResonatorMesh` is plain numpy
@@ -13,7 +13,7 @@ Geometry (units mm; x = lap direction, z = bolt axis, interface plane z = 0):
 * bolt: shank (3) from the nut's lower face to plate B's top face, head (4) on plate B, nut (5)
   under plate A; hole of diameter ``hole_diameter`` through both plates.
 
-Meshing strategy (the gmsh 4.8 traps listed in DESIGN §4.1):
+Meshing strategy (the gmsh 4.8 traps listed in docs/design.md, "The resonator"):
 
 * two independent fragment groups, {part A} and {part B + bolt}: a face-connected group holding
   the two coincident lap faces fails with "Could not recover boundary mesh";
@@ -58,7 +58,7 @@ class GeometryError(RuntimeError):
 
 @dataclass(frozen=True)
 class ResonatorParams:
-    """Parameters of the resonator; all lengths in mm, defaults = DESIGN §4.1."""
+    """Parameters of the resonator; all lengths in mm, defaults = docs/design.md, "The resonator"."""
 
     plate_width: float = 20.0  # y
     plate_thickness: float = 8.0

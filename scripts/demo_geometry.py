@@ -10,7 +10,7 @@ Run: ``.venv/bin/python scripts/demo_geometry.py [--lap-size 4.0]``
 """
 # %% [markdown]
 # ## Parameters
-# Every dimension has a default from DESIGN §4.1; a coarse lap size keeps the demo fast.
+# Every dimension has a default from docs/design.md, "The resonator"; a coarse lap size keeps the demo fast.
 # %%
 import argparse
 

@@ -67,7 +67,7 @@ def test_breathing_mode_and_stuck_joint_frequency(reduced):
     # first elastic mode = breathing (mass A moving in x)
     assert rm.metadata["breathing_index"] == 6
     # with the closed pairs stuck (baseline k = 6e4 N/mm³) the breathing mode is the leaf bending
-    # of DESIGN §4.1 (≈ 248 Hz on the default mesh)
+    # of docs/design.md, "The resonator" (≈ 248 Hz on the default mesh)
     f_stuck = rm.tied_frequencies(6e4)[6]
     assert f_stuck == pytest.approx(248.0, rel=0.05)
 

@@ -1,4 +1,4 @@
-"""fe_joint.mesh: the resonator in dolfinx (serial and mpirun -n 2)."""
+"""fe_joint.fe.mesh: the resonator in dolfinx (serial and mpirun -n 2)."""
 import csv
 import math
 from pathlib import Path

@@ -3,7 +3,7 @@
 A case file has one table per stage (``[geometry]``, ``[material]``, ``[preload]``,
 ``[reduction]``, ``[roughness]``, ``[contact]``, ``[dynamics]``) plus a top-level ``name``. Every
 key is optional: missing keys take the defaults of the embedded default case (the paper's
-resonator study, DESIGN §4.6). Unknown keys, wrong types and out-of-range values raise
+resonator study, docs/design.md, "Configurations"). Unknown keys, wrong types and out-of-range values raise
 :class:`CaseError` with one line naming the key (``section.key``) and the allowed range.
 
 Presets overlay a few keys on the case: ``quick`` (coarse everything; what tests and demos use),
@@ -114,7 +114,7 @@ class Reduction(_Section):
 
 @dataclass(frozen=True)
 class Roughness(_Section):
-    """Composite rough surface (one rough face against a smooth flat, DESIGN §3)."""
+    """Composite rough surface (one rough face against a smooth flat, docs/design.md, "Units and conventions")."""
     section: ClassVar[str] = "roughness"
     rq_um: list = _f([1.0, 5.0, 10.0, 15.0], lo=0.0, lo_open=True, hi=1000.0, item=True)  # Rq sweep, µm
     v_rq_um: float = _f(10.0, lo=0.0, lo_open=True, hi=1000.0)   # Rq of the v1/v2/v3 comparison, µm
@@ -143,7 +143,7 @@ class Dynamics(_Section):
     harmonics: int = _f(3, lo=1, hi=15)
     samples: int = _f(128, lo=8, hi=8192)
     # excitation amplitudes on mass A in x (N); "auto" picks three levels from mostly stuck to
-    # extensive slip with the nonlinear model (DESIGN §4.6)
+    # extensive slip from the stuck-joint estimate (docs/design.md, "Excitation levels")
     levels: Any = _f("auto")
     band: list = _f([0.93, 1.01], lo=0.0, lo_open=True, hi=10.0, item=True)  # sweep band / f_linear
     max_points: int = _f(400, lo=10, hi=100000)

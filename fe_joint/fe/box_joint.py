@@ -15,7 +15,7 @@ The hexahedra are split into 6 tetrahedra (Kuhn split) mirrored about y = 0, so 
 every field on it are mirror-symmetric about the plane y = 0. Nodes are numbered like gmsh
 (tet10 / tri6 in gmsh order) and the result is a ``geometry.resonator.ResonatorMesh`` (its
 ``params`` is a dict of the fixture's lengths instead of ``ResonatorParams``), so
-``fe_joint.mesh.mesh_from_data`` distributes it like the real resonator.
+``fe_joint.fe.mesh.mesh_from_data`` distributes it like the real resonator.
 """
 from __future__ import annotations
 

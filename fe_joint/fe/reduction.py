@@ -2,7 +2,7 @@
 
 Boundary DOFs: all nodes of both lap faces (the matched pairs) plus the excitation/response node;
 fixed-interface modes of (K_II, M_II) up to a cut-off frequency. The constraint-mode blocks come
-from :class:`fe_joint.condensation.BoundaryCondensation` chunk by chunk (bounded memory) and
+from :class:`fe_joint.fe.condensation.BoundaryCondensation` chunk by chunk (bounded memory) and
 K_r,BB = K_BB + K_BI Psi (no dense Psiᵀ K Psi). The same condensed stiffness serves the preload
 contact problem, so the preload costs almost nothing on top of the reduction.
 """
@@ -93,7 +93,7 @@ def craig_bampton(problem, cutoff_hz: float, damping_ratio: float = 1e-3, preloa
     """Craig–Bampton reduced model of an assembled joint.
 
     Args:
-        problem: JointProblem (K, M, layout) from ``joint_setup.assemble_joint``.
+        problem: JointProblem (K, M, layout) from ``fe_joint.fe.assembly.assemble_joint``.
         cutoff_hz: fixed-interface modes up to this frequency are kept, Hz.
         damping_ratio: modal damping ratio of the reduced model, in [0, 1).
         preload: PreloadResult (fills the pair preload fields) or None (zeros, all closed).

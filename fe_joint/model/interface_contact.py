@@ -1,6 +1,6 @@
 """Bolt preload contact on the condensed interface (numpy): active set, pressure recovery, scaling.
 
-Method (DESIGN §4.2):
+Method (docs/design.md, "Preload"):
 
 1. The bolt pretension is an axial shortening eigenstrain eps0 = -e (e_z ⊗ e_z) in the shank. The
    problem is homogeneous (matched pairs start with zero gap), so the active set does not depend on

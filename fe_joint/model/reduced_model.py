@@ -5,7 +5,7 @@ Pure numpy/h5py: ``ReducedModel.load`` works without dolfinx or PETSc.
 DOF order: ``[boundary DOFs, fixed-interface modal coordinates]`` where the boundary DOFs are
 ``[pair A nodes (x, y, z) in pair order, pair B nodes (x, y, z), excitation/response node (x, y, z)]``.
 Pair local frame: rows (t1, t2, n) = (x, y, z); the normal n points from A (below) to B (above), so
-the relative displacement u = q_A - q_B has u_n > 0 when the contact closes (DESIGN §3).
+the relative displacement u = q_A - q_B has u_n > 0 when the contact closes (docs/design.md, "Units and conventions").
 """
 from __future__ import annotations
 
@@ -85,7 +85,7 @@ class ReducedModel:
         preload_pressure: (n_pairs,) MPa.
         preload_gap: (n_pairs,) mm (0 where closed).
         preload_status: (n_pairs,) 0 open, 1 closed tied, 2 closed untied, 3 closed vertex pair
-            inside the contact zone (see ``fe_joint.preload``); closed = status != 0.
+            inside the contact zone (see :mod:`fe_joint.model.interface_contact`); closed = status != 0.
         excitation_dof, response_dof: reduced indices (x direction on mass A).
         full_frequencies: (n_full,) free–free frequencies of the full FE model, Hz (rigid ≈ 0).
         reduced_frequencies: (n,) free–free frequencies of (K, M), Hz.

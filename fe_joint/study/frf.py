@@ -1,7 +1,7 @@
 """Frequency responses of the reduced resonator with a friction element per active pair.
 
-Thin layer between the study (``multiscale``) and the ``hbm`` package: it turns a
-:class:`~fe_joint.joint.JointModel` into ``FrictionContacts`` (element stiffness = k · area; only
+Thin layer between the study and the ``hbm`` package: it turns a
+:class:`~fe_joint.model.joint.JointModel` into ``FrictionContacts`` (element stiffness = k · area; only
 the elements with a contact stiffness are modelled), runs one FRF by continuation, and keeps what
 the report needs at resonance — per-element status, dissipated energy, cycle-mean normal load,
 tangential force amplitude and loops — as plain arrays (:class:`CurveResult`, saved as ``.npz``).

@@ -1,6 +1,6 @@
 """The lap interface seen by the contact solver: global BEM grid, FE → BEM fields, element cells.
 
-Choices (DESIGN §4.4, §4.6; named here because the paper is silent on them):
+Choices (docs/design.md, "Rough contact" and "Configurations"; named here because the paper is silent on them):
 
 * **Global grid** — ``n × n`` cells over the nominal overlap (x ∈ [−L/2, L/2], y ∈ [−W/2, W/2]);
   cells whose centre lies in the bolt hole are masked (no contact possible).
