@@ -84,9 +84,9 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         FRFResult. Raises ConvergenceError if the step falls below ds_min.
     """
     t0 = time.perf_counter()
-    w0 = hb._check_omega(omega_start)
-    w1 = hb._check_omega(omega_end)
-    force = hb._check_force(force)
+    w0 = hb.check_omega(omega_start)
+    w1 = hb.check_omega(omega_end)
+    force = hb.check_force(force)
     if int(dof) != dof or not (0 <= dof < hb.s.n):
         raise ValueError(f"dof must be an integer in [0, {hb.s.n - 1}], got {dof!r}")
     if w0 == w1:
@@ -104,7 +104,7 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         raise ValueError(f"max_domega must be > 0 rad/s, got {max_domega!r}")
 
     sol = hb.solve(w0, force, guess=guess)
-    U = hb._from_el(sol.contact)
+    U = hb.from_contact(sol.contact)
     # amplitude scale: the norm of the current solution, updated at every step, so that the
     # arc length measures *relative* changes of the response (a friction-limited peak far below
     # the linear one is resolved as well as a linear one)
