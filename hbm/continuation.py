@@ -18,14 +18,18 @@
 """
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
 from .errors import ConvergenceError
 from . import stability as stab
 
+#: accepted values of ``ContinuationSettings.stability``
+STABILITY_METHODS = ("auto", "hill", "fold", "none")
 
 
 @dataclass
@@ -53,11 +57,86 @@ class FRFResult:
     newton_iterations: int
 
 
+# ---------------------------------------------------------------------------------- settings
+def _integer(name: str, value, lo: int) -> int:
+    """``value`` as an int >= lo (integral floats accepted), else ValueError naming ``name``."""
+    if (isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value)
+            or float(value) != int(value) or value < lo):
+        raise ValueError(f"ContinuationSettings.{name} must be an integer >= {lo}, got {value!r}")
+    return int(value)
+
+
+def _positive(name: str, value, finite: bool, unit: str = "") -> float:
+    """``value`` as a float > 0 (and finite if ``finite``), else ValueError naming ``name``."""
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and value > 0
+    if not ok or (finite and not np.isfinite(value)):
+        rng = f"in (0, inf){unit}" if finite else f"> 0{unit} (inf allowed)"
+        raise ValueError(f"ContinuationSettings.{name} must be {rng}, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class ContinuationSettings:
+    """Step and stopping settings of :func:`continue_frf` (``HarmonicBalance.frf``), validated once.
+
+    Attributes:
+        max_points: stop after this many points (integer >= 1).
+        ds: initial arc-length step in scaled units (relative change of the response and of the
+            frequency), in (0, inf).
+        ds_max: largest step, > 0 (inf: no bound).
+        ds_min: smallest step, in (0, inf); ``ConvergenceError`` below it. None: 1e-6 ds
+            (resolved on creation).
+        max_corrector: corrector iterations before a step is retried shorter (integer >= 1).
+        stability: "auto" (Hill if small enough, else fold parity), "hill", "fold" or "none".
+        max_domega: largest frequency change per step, rad/s, > 0 (inf: no cap). None: |Δw|/100
+            of the range of the run. Keeps the predictor from stepping over a lightly damped
+            peak where the branch is flat.
+        max_damp: largest relative change of the response amplitude per step, in (0, inf) (a
+            step is halved otherwise), so the response DOF's peak is resolved even in a mode the
+            contacts hardly see.
+
+    Raises:
+        ValueError naming the field and its allowed range.
+    """
+
+    max_points: int = 1000
+    ds: float = 0.02
+    ds_max: float = 0.1
+    ds_min: float | None = None
+    max_corrector: int = 12
+    stability: str = "auto"
+    max_domega: float | None = None
+    max_damp: float = 0.1
+
+    def __post_init__(self) -> None:
+        def put(name, value):                 # frozen: normalized values are set once, here
+            object.__setattr__(self, name, value)
+
+        put("max_points", _integer("max_points", self.max_points, 1))
+        put("max_corrector", _integer("max_corrector", self.max_corrector, 1))
+        put("ds", _positive("ds", self.ds, finite=True))
+        put("ds_max", _positive("ds_max", self.ds_max, finite=False))
+        put("ds_min", 1e-6 * self.ds if self.ds_min is None else _positive("ds_min", self.ds_min, True))
+        if self.max_domega is not None:
+            put("max_domega", _positive("max_domega", self.max_domega, finite=False, unit=" rad/s"))
+        put("max_damp", _positive("max_damp", self.max_damp, finite=True))
+        if not isinstance(self.stability, str) or self.stability not in STABILITY_METHODS:
+            raise ValueError(f"ContinuationSettings.stability must be one of {'|'.join(STABILITY_METHODS)}, "
+                             f"got {self.stability!r}")
+
+    @classmethod
+    def from_options(cls, **options) -> ContinuationSettings:
+        """Settings from ``frf``'s keyword options (the field names); None means the default."""
+        return cls(**{k: v for k, v in options.items() if v is not None})
+
+    def frequency_cap(self, omega_start: float, omega_end: float) -> float:
+        """``max_domega`` for a run over [omega_start, omega_end], rad/s (default range/100)."""
+        return abs(omega_end - omega_start) / 100.0 if self.max_domega is None else self.max_domega
+
+
 def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
-                 max_points: int = 1000, ds: float | None = None, ds_max: float | None = None,
-                 ds_min: float | None = None, max_corrector: int = 12,
-                 stability: str = "auto", max_domega: float | None = None,
-                 max_damp: float = 0.1, guess=None, stop=None) -> FRFResult:
+                 settings: ContinuationSettings | None = None, *, guess=None,
+                 stop: Callable[[list], bool] | None = None) -> FRFResult:
     """Continue the periodic response from omega_start to omega_end (rad/s).
 
     Args:
@@ -65,25 +144,21 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         omega_start, omega_end: frequency range, rad/s (either order).
         force: (n,) amplitude of force·cos(wt), N.
         dof: response DOF for ``amplitude``.
-        max_points: stop after this many points.
-        ds: initial arc-length step in scaled units (relative change of the response and of the
-            frequency; default 0.02).
-        ds_max, ds_min: step bounds (default 0.1, 1e-6 ds).
-        max_corrector: corrector iterations before a step is retried shorter.
-        stability: "auto" (Hill if small enough, else fold parity), "hill", "fold", "none".
-        max_domega: largest frequency change per step, rad/s (default |Δw|/100): keeps the
-            predictor from stepping over a lightly damped peak where the branch is flat.
-        max_damp: largest relative change of the response amplitude per step (a step is halved
-            otherwise), so the response DOF's peak is resolved even in a mode the contacts hardly see.
+        settings: ContinuationSettings (default: ``ContinuationSettings()``).
         guess: optional Solution to start Newton from at omega_start (e.g. a neighbouring solution
             of a slightly different system); default the linear-base response.
-        stop: optional callable(amplitudes) -> bool, called with the amplitudes of the points so
-            far after each point; True ends the branch there (e.g. once a peak has been passed).
+        stop: optional callable(amplitudes) -> bool, called with the list of amplitudes (mm) of
+            the points so far after each point; True ends the branch there (e.g. once a peak
+            has been passed).
 
     Returns:
-        FRFResult. Raises ConvergenceError if the step falls below ds_min.
+        FRFResult. Raises ConvergenceError if the step falls below ds_min, ValueError on bad
+        input, TypeError if ``settings`` is not a ContinuationSettings.
     """
     t0 = time.perf_counter()
+    settings = ContinuationSettings() if settings is None else settings
+    if not isinstance(settings, ContinuationSettings):
+        raise TypeError(f"settings must be a ContinuationSettings, got {type(settings).__name__}")
     w0 = hb.check_omega(omega_start)
     w1 = hb.check_omega(omega_end)
     force = hb.check_force(force)
@@ -91,17 +166,11 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         raise ValueError(f"dof must be an integer in [0, {hb.s.n - 1}], got {dof!r}")
     if w0 == w1:
         raise ValueError("omega_start and omega_end must differ")
-    if stability not in ("auto", "hill", "fold", "none"):
-        raise ValueError(f"stability must be auto|hill|fold|none, got {stability!r}")
     direction = np.sign(w1 - w0)
     ws = w0
-    if ds is None:
-        ds = 0.02
-    ds_max = 0.1 if ds_max is None else ds_max
-    ds_min = 1e-6 * ds if ds_min is None else ds_min
-    max_domega = abs(w1 - w0) / 100.0 if max_domega is None else float(max_domega)
-    if not max_domega > 0:
-        raise ValueError(f"max_domega must be > 0 rad/s, got {max_domega!r}")
+    ds, ds_max, ds_min, max_corrector = settings.ds, settings.ds_max, settings.ds_min, settings.max_corrector
+    max_points, stability, max_damp = settings.max_points, settings.stability, settings.max_damp
+    max_domega = settings.frequency_cap(w0, w1)
 
     sol = hb.solve(w0, force, guess=guess)
     U = hb.from_contact(sol.contact)

@@ -35,12 +35,14 @@ reached when it stalls.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .continuation import ContinuationSettings, FRFResult, continue_frf
 from .errors import ConvergenceError
 from .fourier import Fourier
 from .friction import FrictionContacts
@@ -549,7 +551,33 @@ class HarmonicBalance:
         return ElementResults(hist["status"], W, hist["N"].mean(axis=1), hist["slip_fraction"],
                               hist["u_t"], hist["T"], hist["N"], t)
 
-    def frf(self, omega_start: float, omega_end: float, force, dof: int, **kw):
-        """Frequency response by pseudo-arc-length continuation; see ``continuation.continue_frf``."""
-        from .continuation import continue_frf
-        return continue_frf(self, omega_start, omega_end, force, dof, **kw)
+    def frf(self, omega_start: float, omega_end: float, force, dof: int, *,
+            settings: ContinuationSettings | None = None, guess: Solution | None = None,
+            stop: Callable[[list], bool] | None = None, **options) -> FRFResult:
+        """Frequency response by pseudo-arc-length continuation (``continuation.continue_frf``).
+
+        The step and stopping settings come either from ``settings`` or from keyword ``options``
+        named like its fields (``max_points=``, ``ds=``, ``ds_max=``, ``ds_min=``,
+        ``max_corrector=``, ``stability=``, ``max_domega=``, ``max_damp=``; None means the
+        default), never from both: giving both raises TypeError, so no setting is silently
+        overridden. Either way they are validated by :class:`ContinuationSettings`.
+
+        Args:
+            omega_start, omega_end: frequency range, rad/s (either order).
+            force: (n,) amplitude of force·cos(wt), N.
+            dof: response DOF of ``FRFResult.amplitude``.
+            settings: a ContinuationSettings.
+            guess: optional Solution (or object with ``.contact``) to start Newton from at
+                omega_start; default the linear-base response.
+            stop: optional callable(amplitudes so far, mm) -> bool; True ends the branch there.
+            **options: ContinuationSettings fields, when ``settings`` is not given.
+
+        Returns:
+            FRFResult (ConvergenceError if the step falls below ds_min).
+        """
+        if settings is not None and options:
+            raise TypeError("frf: give either settings= or the keyword options "
+                            f"({', '.join(sorted(options))}), not both")
+        if settings is None:
+            settings = ContinuationSettings.from_options(**options)
+        return continue_frf(self, omega_start, omega_end, force, dof, settings, guess=guess, stop=stop)
