@@ -8,6 +8,8 @@ Public API (DESIGN §5)::
     hb = HarmonicBalance(s, c, harmonics=3, samples=128)
     sol = hb.solve(omega, force); sol.coefficients; sol.amplitude(dof)
     frf = hb.frf(omega_start, omega_end, force, dof=d); frf.omega, frf.amplitude, frf.stable
+    frf = hb.frf(..., settings=ContinuationSettings(max_points=500, max_domega=0.1))  # or the same
+                                                 # fields as keywords (max_points=500, ...), not both
     er = hb.element_results(sol)                 # status, energy, mean_normal, u_t, T, N
 """
 from .errors import ConvergenceError
@@ -15,8 +17,8 @@ from .fourier import Fourier
 from .friction import FrictionContacts, STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OPEN, OPEN
 from .structure import LinearStructure
 from .harmonic_balance import HarmonicBalance, Solution, ElementResults
-from .continuation import FRFResult
+from .continuation import ContinuationSettings, FRFResult
 
 __all__ = ["ConvergenceError", "Fourier", "FrictionContacts", "LinearStructure", "HarmonicBalance",
-           "Solution", "ElementResults", "FRFResult", "STUCK", "STICK_SLIP", "GROSS_SLIP",
-           "PARTLY_OPEN", "OPEN"]
+           "Solution", "ElementResults", "FRFResult", "ContinuationSettings", "STUCK", "STICK_SLIP",
+           "GROSS_SLIP", "PARTLY_OPEN", "OPEN"]

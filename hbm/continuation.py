@@ -15,17 +15,28 @@
 * Step length grows x1.5 after <= 3 corrector iterations, shrinks x0.7 after >= 7, halves on failure;
   ``ConvergenceError`` below ds_min. Turning points (sign changes of the w-component of the tangent)
   are listed in ``FRFResult.turning_points``.
+
+Code layout (predictor / corrector / step control kept apart, as in pyHarm): the settings are a
+frozen, validated :class:`ContinuationSettings`; :class:`_Scaling` maps (U, w) to Y; ``_tangent``
+is the predictor, ``_correct`` (with ``_line_search``) the corrector, ``_cap_step`` and
+``_adapt_step`` the step control; :class:`_Branch` holds the state of one run (current point,
+tangent, step, points so far) and handles corner folds and the end of the range;
+``_turning_points`` and ``_stability`` assemble the result.
 """
 from __future__ import annotations
 
+import numbers
 import time
 from dataclasses import dataclass, field
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 from .errors import ConvergenceError
 from . import stability as stab
 
+#: accepted values of ``ContinuationSettings.stability``
+STABILITY_METHODS = ("auto", "hill", "fold", "none")
 
 
 @dataclass
@@ -53,11 +64,400 @@ class FRFResult:
     newton_iterations: int
 
 
+# ---------------------------------------------------------------------------------- settings
+def _integer(name: str, value, lo: int) -> int:
+    """``value`` as an int >= lo (integral floats accepted), else ValueError naming ``name``."""
+    if (isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value)
+            or float(value) != int(value) or value < lo):
+        raise ValueError(f"ContinuationSettings.{name} must be an integer >= {lo}, got {value!r}")
+    return int(value)
+
+
+def _positive(name: str, value, finite: bool, unit: str = "") -> float:
+    """``value`` as a float > 0 (and finite if ``finite``), else ValueError naming ``name``."""
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and value > 0
+    if not ok or (finite and not np.isfinite(value)):
+        rng = f"in (0, inf){unit}" if finite else f"> 0{unit} (inf allowed)"
+        raise ValueError(f"ContinuationSettings.{name} must be {rng}, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class ContinuationSettings:
+    """Step and stopping settings of :func:`continue_frf` (``HarmonicBalance.frf``), validated once.
+
+    Attributes:
+        max_points: stop after this many points (integer >= 1).
+        ds: initial arc-length step in scaled units (relative change of the response and of the
+            frequency), in (0, inf).
+        ds_max: largest step, > 0 (inf: no bound).
+        ds_min: smallest step, in (0, inf); ``ConvergenceError`` below it. None: 1e-6 ds
+            (resolved on creation).
+        max_corrector: corrector iterations before a step is retried shorter (integer >= 1).
+        stability: "auto" (Hill if small enough, else fold parity), "hill", "fold" or "none".
+        max_domega: largest frequency change per step, rad/s, > 0 (inf: no cap). None: |Δw|/100
+            of the range of the run. Keeps the predictor from stepping over a lightly damped
+            peak where the branch is flat.
+        max_damp: largest relative change of the response amplitude per step, in (0, inf) (a
+            step is halved otherwise), so the response DOF's peak is resolved even in a mode the
+            contacts hardly see.
+
+    Raises:
+        ValueError naming the field and its allowed range.
+    """
+
+    max_points: int = 1000
+    ds: float = 0.02
+    ds_max: float = 0.1
+    ds_min: float | None = None
+    max_corrector: int = 12
+    stability: str = "auto"
+    max_domega: float | None = None
+    max_damp: float = 0.1
+
+    def __post_init__(self) -> None:
+        def put(name, value):                 # frozen: normalized values are set once, here
+            object.__setattr__(self, name, value)
+
+        put("max_points", _integer("max_points", self.max_points, 1))
+        put("max_corrector", _integer("max_corrector", self.max_corrector, 1))
+        put("ds", _positive("ds", self.ds, finite=True))
+        put("ds_max", _positive("ds_max", self.ds_max, finite=False))
+        put("ds_min", 1e-6 * self.ds if self.ds_min is None else _positive("ds_min", self.ds_min, True))
+        if self.max_domega is not None:
+            put("max_domega", _positive("max_domega", self.max_domega, finite=False, unit=" rad/s"))
+        put("max_damp", _positive("max_damp", self.max_damp, finite=True))
+        if not isinstance(self.stability, str) or self.stability not in STABILITY_METHODS:
+            raise ValueError(f"ContinuationSettings.stability must be one of {'|'.join(STABILITY_METHODS)}, "
+                             f"got {self.stability!r}")
+
+    @classmethod
+    def from_options(cls, **options) -> ContinuationSettings:
+        """Settings from ``frf``'s keyword options (the field names); None means the default."""
+        return cls(**{k: v for k, v in options.items() if v is not None})
+
+    def frequency_cap(self, omega_start: float, omega_end: float) -> float:
+        """``max_domega`` for a run over [omega_start, omega_end], rad/s (default range/100)."""
+        return abs(omega_end - omega_start) / 100.0 if self.max_domega is None else self.max_domega
+
+
+# ---------------------------------------------------------------------------------- pieces
+class _Eval(NamedTuple):
+    """Residual R (n_H, n_c), correction force g, nonlinear elements nl, their dg/dU blocks Dg,
+    and the norm scale max(|U|, |U_lin|) of the convergence test (mm)."""
+    R: np.ndarray
+    g: np.ndarray
+    nl: np.ndarray
+    Dg: np.ndarray | None
+    scale: float
+
+
+class _Correction(NamedTuple):
+    """Corrector outcome: converged?, last iterate (U (n_H, n_c) mm, w rad/s), its evaluation,
+    iterations used."""
+    ok: bool
+    U: np.ndarray
+    w: float
+    ev: _Eval
+    it: int
+
+
+class _Scaling:
+    """Scaled unknowns Y = (U / us, w / ws) in which the arc length is measured.
+
+    Args:
+        us: amplitude scale, mm (the norm of the current solution; see :meth:`rescale`).
+        ws: frequency scale, rad/s (the start frequency).
+        shape: shape (n_H, n_c) of U.
+    """
+
+    def __init__(self, us: float, ws: float, shape: tuple) -> None:
+        self.us, self.ws, self.shape = us, ws, shape
+
+    def Y(self, U: np.ndarray, w: float) -> np.ndarray:
+        """Scaled vector (U.size + 1,) of (U, w); also maps a direction (dU, dw) to scaled units."""
+        return np.concatenate([U.ravel() / self.us, [w / self.ws]])
+
+    def unscale(self, Y: np.ndarray) -> tuple[np.ndarray, float]:
+        """(U (n_H, n_c) mm, w rad/s) of a scaled vector Y."""
+        return Y[:-1].reshape(self.shape) * self.us, Y[-1] * self.ws
+
+    def border(self, t: np.ndarray) -> tuple[np.ndarray, float]:
+        """Last row (tU, tw) of the bordered system for the scaled direction t: t . dY = tU . dU + tw dw."""
+        return t[:-1].reshape(self.shape) / self.us, t[-1] / self.ws
+
+    def rescale(self, U: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Make us the norm of U (so steps stay relative changes); returns t in the new scaling."""
+        nu = np.linalg.norm(U)
+        if nu > 0 and nu != self.us:
+            tu = np.concatenate([t[:-1] * (self.us / nu), t[-1:]])
+            t = tu / np.linalg.norm(tu)
+            self.us = nu
+        return t
+
+
+def _evaluate(hb, force: np.ndarray, U: np.ndarray, w: float) -> _Eval:
+    """Residual and Jacobian blocks at (U mm, w rad/s) for force amplitude ``force`` (N)."""
+    Ul = hb.ulin(w, force)
+    R, g, nl, Dg = hb.residual(U, w, Ul)
+    return _Eval(R, g, nl, Dg, max(np.linalg.norm(U), np.linalg.norm(Ul), 1e-300))
+
+
+def _tangent(hb, force: np.ndarray, sc: _Scaling, w: float, ev: _Eval, prev: np.ndarray,
+             ref_sign: int | None) -> tuple[np.ndarray, int]:
+    """Predictor: unit tangent of the branch at the point evaluated in ``ev`` (frequency w, rad/s).
+
+    Solves the bordered system with the previous tangent ``prev`` as last row (so t . prev > 0
+    before orientation) and flips t when the bordered determinant's sign differs from
+    ``ref_sign``: robust at the corner folds of the piecewise-linear contact laws, where the
+    tangent can turn by > 90 deg. A sign of 0 (unknown: GMRES path) never flips.
+
+    Returns:
+        (t (U.size + 1,) scaled and of unit norm, sign of the bordered determinant or 0).
+    """
+    Rw = hb.r_omega(w, force, ev.g)
+    tU, tw = sc.border(prev)
+    [(dU, dw)], sign = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(np.zeros(sc.shape), -1.0)])
+    t = sc.Y(dU, dw)
+    t /= np.linalg.norm(t)
+    if ref_sign is not None and sign != 0 and sign != ref_sign:
+        t = -t
+    return t, sign
+
+
+def _line_search(hb, force: np.ndarray, U: np.ndarray, w: float, dU: np.ndarray, dw: float,
+                 r: float):
+    """Damping of a corrector step: halve alpha (at most 6 times) while ||R|| does not decrease.
+
+    Args:
+        U, w: current iterate (mm, rad/s); dU, dw: full Newton step; r: ||R|| at (U, w).
+
+    Returns:
+        (alpha, U + a dU, w + a dw, evaluation there or None) where ``a`` is the last alpha
+        tried; after 6 failed tries alpha has been halved once more than ``a`` (kept as it was).
+        The caller rejects the step when the frequency of the last try is <= 0.
+    """
+    alpha, evt = 1.0, None
+    for _ in range(6):
+        Ut, wt = U + alpha * dU, w + alpha * dw
+        if wt > 0:
+            evt = _evaluate(hb, force, Ut, wt)
+            if np.linalg.norm(evt.R) <= (1 - 1e-4 * alpha) * r:
+                break
+        alpha *= 0.5
+    return alpha, Ut, wt, evt
+
+
+def _correct(hb, force: np.ndarray, sc: _Scaling, Yp: np.ndarray, t: np.ndarray,
+             max_corrector: int) -> _Correction:
+    """Corrector: damped Newton on {R = 0, t . (Y - Yp) = 0} from the scaled predictor Yp.
+
+    Args:
+        t: scaled unit tangent that defines the hyperplane through Yp.
+        max_corrector: iteration limit.
+
+    Returns:
+        _Correction; ``ok`` False if the limit is reached or a step would make w <= 0.
+    """
+    U, w = sc.unscale(Yp)
+    ev = _evaluate(hb, force, U, w)
+    step = np.inf
+    for it in range(1, max_corrector + 1):
+        r = np.linalg.norm(ev.R)
+        if it > 1 and hb.converged(r, ev.scale, step):
+            return _Correction(True, U, w, ev, it)
+        Rw = hb.r_omega(w, force, ev.g)
+        cval = t @ (sc.Y(U, w) - Yp)
+        tU, tw = sc.border(t)
+        [(dU, dw)], _ = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(ev.R, cval)])
+        alpha, Ut, wt, evt = _line_search(hb, force, U, w, dU, dw, r)
+        if wt <= 0:
+            return _Correction(False, U, w, ev, it)
+        step = max(np.linalg.norm(alpha * dU), abs(alpha * dw) / sc.ws * ev.scale)
+        U, w, ev = Ut, wt, evt
+    return _Correction(False, U, w, ev, max_corrector)
+
+
+def _cap_step(ds: float, t: np.ndarray, ws: float, max_domega: float) -> float:
+    """Step ds (scaled) shortened so that the frequency moves by at most max_domega (rad/s)."""
+    return min(ds, max_domega / (abs(t[-1]) * ws)) if t[-1] != 0 else ds
+
+
+def _adapt_step(ds: float, iterations: int, ds_max: float) -> float:
+    """Next step after an accepted point: x1.5 (<= ds_max) after <= 3 corrector iterations,
+    x0.7 after >= 7."""
+    if iterations <= 3:
+        return min(ds * 1.5, ds_max)
+    if iterations >= 7:
+        return ds * 0.7
+    return ds
+
+
+def _turning_points(taus: np.ndarray) -> list[int]:
+    """Indices i >= 1 where the w-component of the tangent changed sign from point i - 1."""
+    s = np.sign(taus)
+    return (np.flatnonzero(s[1:] != s[:-1]) + 1).tolist()
+
+
+def _stability(hb, sols: list, turning: list[int], stability: str) -> tuple[np.ndarray, str]:
+    """Stability flag of each point and the method used ("hill", "fold-parity" or "none")."""
+    method = stability
+    if stability == "auto":
+        method = "hill" if stab.hill_available(hb) else "fold"
+    if method == "hill":
+        return np.array([stab.is_stable_hill(hb, s_) for s_ in sols]), method
+    if method == "fold":
+        # the branch starts stable and stability flips at every turning point
+        flips = np.searchsorted(np.asarray(turning, dtype=int), np.arange(len(sols)), side="right")
+        return flips % 2 == 0, "fold-parity"
+    return np.ones(len(sols), dtype=bool), method
+
+
+# ---------------------------------------------------------------------------------- one run
+class _Branch:
+    """State of one continuation run: current point (U, w), tangent t, step ds, points so far.
+
+    Args:
+        hb: the HarmonicBalance solver.
+        force: (n,) validated force amplitude, N.
+        dof: response DOF of the amplitudes.
+        w0, w1: validated start and end frequencies, rad/s.
+        settings: the run's ContinuationSettings.
+        guess: optional Solution (or object with ``.contact``) to start Newton from at w0.
+    """
+
+    def __init__(self, hb, force: np.ndarray, dof: int, w0: float, w1: float,
+                 settings: ContinuationSettings, guess=None) -> None:
+        self.hb, self.force, self.dof, self.w0, self.w1 = hb, force, dof, w0, w1
+        self.settings = settings
+        self.direction = np.sign(w1 - w0)
+        self.ds = settings.ds
+        self.max_domega = settings.frequency_cap(w0, w1)
+        sol = hb.solve(w0, force, guess=guess)
+        self.U, self.w = hb.from_contact(sol.contact), w0
+        # amplitude scale: the norm of the current solution, updated at every step, so that the
+        # arc length measures *relative* changes of the response (a friction-limited peak far
+        # below the linear one is resolved as well as a linear one)
+        us = np.linalg.norm(self.U) if np.linalg.norm(self.U) > 0 else 1.0
+        self.sc = _Scaling(us, w0, self.U.shape)
+        self.total_it = sol.iterations
+        t_guess = np.zeros(self.U.size + 1)
+        t_guess[-1] = self.direction
+        ev0 = _evaluate(hb, force, self.U, w0)
+        self.t, self.ref_sign = _tangent(hb, force, self.sc, w0, ev0, t_guess, None)
+        if self.t[-1] * self.direction < 0:
+            # the branch starts towards w1; the determinant sign of that orientation is the reference
+            self.t = -self.t
+            self.ref_sign = -self.ref_sign
+        # keep the Jacobian on each point only where Hill's method may use it (memory)
+        self.keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
+        self.sols, self.taus = [sol], [self.t[-1]]
+        self.amp_prev = sol.amplitude(dof)
+        self.amps = [self.amp_prev]
+
+    def run(self, stop: Callable[[list], bool] | None) -> None:
+        """Add points until max_points, the end of the range, a return below the start by more
+        than the range, or ``stop(amplitudes so far)`` returns True."""
+        while len(self.sols) < self.settings.max_points:
+            self.t = self.sc.rescale(self.U, self.t)
+            self._accept(self._next_point())
+            if self._past_end():
+                break
+            self.amps.append(self.amp_prev)
+            if stop is not None and stop(self.amps):
+                break
+
+    def _next_point(self) -> _Correction:
+        """Predict along t and correct, halving ds until a point is accepted.
+
+        Raises:
+            ConvergenceError when ds falls below ds_min.
+        """
+        s = self.settings
+        Y = self.sc.Y(self.U, self.w)
+        while True:
+            self.ds = _cap_step(self.ds, self.t, self.sc.ws, self.max_domega)
+            Yp = Y + self.ds * self.t
+            corr = _correct(self.hb, self.force, self.sc, Yp, self.t, s.max_corrector)
+            self.total_it += corr.it
+            if corr.ok:
+                if self._amplitude_step_ok(corr):
+                    return corr
+                self.ds *= 0.5
+                continue
+            corr, ok = self._corner_restart(Y, Yp, corr)
+            if ok:
+                return corr
+            self.ds *= 0.5
+            if self.ds < s.ds_min:
+                raise ConvergenceError(f"continuation step fell below ds_min near omega = {self.w:.6g} rad/s",
+                                       float(np.linalg.norm(corr.ev.R) / corr.ev.scale))
+
+    def _amplitude_step_ok(self, corr: _Correction) -> bool:
+        """The arc length lives on the contact unknowns; the response DOF may resonate in a mode
+        the contacts hardly see, so its relative change per step is bounded by max_damp too
+        (unless ds is already within 4 ds_min)."""
+        s = self.settings
+        cand = self.hb.make_solution(corr.w, self.force, corr.U, 0.0, corr.it, 0, g=corr.ev.g)
+        a_new = cand.amplitude(self.dof)
+        return abs(a_new - self.amp_prev) <= s.max_damp * max(a_new, self.amp_prev) or self.ds <= 4 * s.ds_min
+
+    def _corner_restart(self, Y: np.ndarray, Yp: np.ndarray, failed: _Correction):
+        """Corner fold of the piecewise-linear contact laws.
+
+        The branch turns back exactly where a time sample switches state, so no point exists on
+        the hyperplane ahead. Take the tangent of the piece beyond the corner (Jacobian at the
+        predictor Yp), orient it by the bordered-determinant sign, and restart the corrector from
+        the corner (the failed corrector's last iterate) along it.
+
+        Returns:
+            (the restart's _Correction, accepted?: converged and moved by > 1e-3 ds from Y).
+        """
+        Up, wp = self.sc.unscale(Yp)
+        evp = _evaluate(self.hb, self.force, Up, wp)
+        tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign)
+        Yc = self.sc.Y(failed.U, failed.w)
+        corr = _correct(self.hb, self.force, self.sc, Yc + self.ds * tb, tb, self.settings.max_corrector)
+        self.total_it += corr.it
+        return corr, bool(corr.ok and np.linalg.norm(self.sc.Y(corr.U, corr.w) - Y) > 1e-3 * self.ds)
+
+    def _accept(self, corr: _Correction) -> None:
+        """Make the corrected point current: new tangent, Solution, amplitude, next step."""
+        hb, ev = self.hb, corr.ev
+        self.U, self.w = corr.U, corr.w
+        self.t, _ = _tangent(hb, self.force, self.sc, self.w, ev, self.t, self.ref_sign)
+        self.sols.append(hb.make_solution(self.w, self.force, self.U, float(np.linalg.norm(ev.R) / ev.scale),
+                                          corr.it, ev.nl.size, g=ev.g,
+                                          jac=(ev.nl, ev.Dg) if self.keep_jac else None))
+        self.amp_prev = self.sols[-1].amplitude(self.dof)
+        self.taus.append(self.t[-1])
+        self.ds = _adapt_step(self.ds, corr.it, self.settings.ds_max)
+
+    def _past_end(self) -> bool:
+        """True if the last point is beyond w1 (then re-solved exactly at w1 when Newton manages)
+        or back below w0 by more than the range."""
+        if (self.w - self.w1) * self.direction >= 0:
+            try:
+                self.sols[-1] = self.hb.solve(self.w1, self.force, guess=self.sols[-1])
+            except ConvergenceError:
+                pass
+            return True
+        return bool((self.w - self.w0) * self.direction < -abs(self.w1 - self.w0))
+
+    def result(self, t_start: float) -> FRFResult:
+        """FRFResult of the points so far, with stability; wall time from ``t_start`` (perf_counter)."""
+        sols = self.sols
+        omega = np.array([s_.omega for s_ in sols])
+        amp = np.array([s_.amplitude(self.dof) for s_ in sols])
+        turning = _turning_points(np.array(self.taus))
+        stable, method = _stability(self.hb, sols, turning, self.settings.stability)
+        return FRFResult(omega, amp, stable, sols, turning, method, time.perf_counter() - t_start,
+                         self.total_it)
+
+
 def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
-                 max_points: int = 1000, ds: float | None = None, ds_max: float | None = None,
-                 ds_min: float | None = None, max_corrector: int = 12,
-                 stability: str = "auto", max_domega: float | None = None,
-                 max_damp: float = 0.1, guess=None, stop=None) -> FRFResult:
+                 settings: ContinuationSettings | None = None, *, guess=None,
+                 stop: Callable[[list], bool] | None = None) -> FRFResult:
     """Continue the periodic response from omega_start to omega_end (rad/s).
 
     Args:
@@ -65,194 +465,28 @@ def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,
         omega_start, omega_end: frequency range, rad/s (either order).
         force: (n,) amplitude of force·cos(wt), N.
         dof: response DOF for ``amplitude``.
-        max_points: stop after this many points.
-        ds: initial arc-length step in scaled units (relative change of the response and of the
-            frequency; default 0.02).
-        ds_max, ds_min: step bounds (default 0.1, 1e-6 ds).
-        max_corrector: corrector iterations before a step is retried shorter.
-        stability: "auto" (Hill if small enough, else fold parity), "hill", "fold", "none".
-        max_domega: largest frequency change per step, rad/s (default |Δw|/100): keeps the
-            predictor from stepping over a lightly damped peak where the branch is flat.
-        max_damp: largest relative change of the response amplitude per step (a step is halved
-            otherwise), so the response DOF's peak is resolved even in a mode the contacts hardly see.
+        settings: ContinuationSettings (default: ``ContinuationSettings()``).
         guess: optional Solution to start Newton from at omega_start (e.g. a neighbouring solution
             of a slightly different system); default the linear-base response.
-        stop: optional callable(amplitudes) -> bool, called with the amplitudes of the points so
-            far after each point; True ends the branch there (e.g. once a peak has been passed).
+        stop: optional callable(amplitudes) -> bool, called with the list of amplitudes (mm) of
+            the points so far after each point; True ends the branch there (e.g. once a peak
+            has been passed).
 
     Returns:
-        FRFResult. Raises ConvergenceError if the step falls below ds_min.
+        FRFResult. Raises ConvergenceError if the step falls below ds_min, ValueError on bad
+        input, TypeError if ``settings`` is not a ContinuationSettings.
     """
     t0 = time.perf_counter()
-    w0 = hb._check_omega(omega_start)
-    w1 = hb._check_omega(omega_end)
-    force = hb._check_force(force)
+    settings = ContinuationSettings() if settings is None else settings
+    if not isinstance(settings, ContinuationSettings):
+        raise TypeError(f"settings must be a ContinuationSettings, got {type(settings).__name__}")
+    w0 = hb.check_omega(omega_start)
+    w1 = hb.check_omega(omega_end)
+    force = hb.check_force(force)
     if int(dof) != dof or not (0 <= dof < hb.s.n):
         raise ValueError(f"dof must be an integer in [0, {hb.s.n - 1}], got {dof!r}")
     if w0 == w1:
         raise ValueError("omega_start and omega_end must differ")
-    if stability not in ("auto", "hill", "fold", "none"):
-        raise ValueError(f"stability must be auto|hill|fold|none, got {stability!r}")
-    direction = np.sign(w1 - w0)
-    ws = w0
-    if ds is None:
-        ds = 0.02
-    ds_max = 0.1 if ds_max is None else ds_max
-    ds_min = 1e-6 * ds if ds_min is None else ds_min
-    max_domega = abs(w1 - w0) / 100.0 if max_domega is None else float(max_domega)
-    if not max_domega > 0:
-        raise ValueError(f"max_domega must be > 0 rad/s, got {max_domega!r}")
-
-    sol = hb.solve(w0, force, guess=guess)
-    U = hb._from_el(sol.contact)
-    # amplitude scale: the norm of the current solution, updated at every step, so that the
-    # arc length measures *relative* changes of the response (a friction-limited peak far below
-    # the linear one is resolved as well as a linear one)
-    us = np.linalg.norm(U) if np.linalg.norm(U) > 0 else 1.0
-    total_it = sol.iterations
-    shape = U.shape
-
-    def Y_of(U, w):
-        return np.concatenate([U.ravel() / us, [w / ws]])
-
-    def evaluate(U, w):
-        Ul = hb.ulin(w, force)
-        R, g, nl, Dg = hb.residual(U, w, Ul)
-        return R, g, nl, Dg, max(np.linalg.norm(U), np.linalg.norm(Ul), 1e-300)
-
-    def tangent(U, w, ev, prev, ref_sign):
-        """Unit tangent oriented by the sign of the bordered determinant (robust at the corner
-        folds of the piecewise-linear contact laws, where the tangent can turn by > 90 deg)."""
-        R, g, nl, Dg, _ = ev
-        Rw = hb.r_omega(w, force, g)
-        [(dU, dw)], sign = hb.linsolve_aug(w, nl, Dg, Rw, prev[:-1].reshape(shape) / us,
-                                           prev[-1] / ws, [(np.zeros(shape), -1.0)])
-        t = np.concatenate([dU.ravel() / us, [dw / ws]])
-        t /= np.linalg.norm(t)
-        if ref_sign is not None and sign != 0 and sign != ref_sign:
-            t = -t
-        return t, sign
-
-    def corrector(Yp, t):
-        """Damped Newton on {R = 0, t.(Y - Yp) = 0} from the predictor Yp."""
-        Uc, wc = Yp[:-1].reshape(shape) * us, Yp[-1] * ws
-        ev = evaluate(Uc, wc)
-        step = np.inf
-        tk = t
-        for it in range(1, max_corrector + 1):
-            R, g, nl, Dg, scale = ev
-            r = np.linalg.norm(R)
-            if it > 1 and hb.converged(r, scale, step):
-                return True, Uc, wc, ev, it
-            Rw = hb.r_omega(wc, force, g)
-            cval = tk @ (Y_of(Uc, wc) - Yp)
-            [(dU, dw)], _ = hb.linsolve_aug(wc, nl, Dg, Rw, tk[:-1].reshape(shape) / us, tk[-1] / ws,
-                                            [(R, cval)])
-            # damped step: halve while the residual does not decrease
-            alpha = 1.0
-            for _ in range(6):
-                Ut, wt = Uc + alpha * dU, wc + alpha * dw
-                if wt > 0:
-                    evt = evaluate(Ut, wt)
-                    if np.linalg.norm(evt[0]) <= (1 - 1e-4 * alpha) * r:
-                        break
-                alpha *= 0.5
-            if wt <= 0:
-                return False, Uc, wc, ev, it
-            step = max(np.linalg.norm(alpha * dU), abs(alpha * dw) / ws * scale)
-            Uc, wc, ev = Ut, wt, evt
-        return False, Uc, wc, ev, max_corrector
-
-    ev0 = evaluate(U, w0)
-    t0_guess = np.zeros(U.size + 1)
-    t0_guess[-1] = direction
-    t, ref_sign = tangent(U, w0, ev0, t0_guess, None)
-    if t[-1] * direction < 0:
-        t = -t
-        ref_sign = -ref_sign
-    keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
-    sols, taus = [sol], [t[-1]]
-    amp_prev = sol.amplitude(dof)
-    amps = [amp_prev]
-    w = w0
-    while len(sols) < max_points:
-        nu = np.linalg.norm(U)
-        if nu > 0 and nu != us:
-            # rescale the tangent to the new amplitude scale
-            tu = np.concatenate([t[:-1] * (us / nu), t[-1:]])
-            t = tu / np.linalg.norm(tu)
-            us = nu
-        Y = Y_of(U, w)
-        while True:
-            # the frequency step is capped at max_domega
-            ds = min(ds, max_domega / (abs(t[-1]) * ws)) if t[-1] != 0 else ds
-            Yp = Y + ds * t
-            ok, Uc, wc, ev, it = corrector(Yp, t)
-            total_it += it
-            if ok:
-                # the arc length lives on the contact unknowns; the response DOF may resonate in a
-                # mode the contacts hardly see, so also bound its relative change per step
-                R_, g_, _, _, _ = ev
-                cand = hb.make_solution(wc, force, Uc, 0.0, it, 0, g=g_)
-                a_new = cand.amplitude(dof)
-                if abs(a_new - amp_prev) <= max_damp * max(a_new, amp_prev) or ds <= 4 * ds_min:
-                    break
-                ds *= 0.5
-                continue
-            # Corner fold of the piecewise-linear contact laws: the branch turns back exactly where
-            # a time sample switches state, so no point exists on the hyperplane ahead. Take the
-            # tangent of the piece beyond the corner (Jacobian at the predictor), orient it by the
-            # bordered-determinant sign, and restart from the corner point along it.
-            evp = evaluate(Yp[:-1].reshape(shape) * us, Yp[-1] * ws)
-            if ref_sign is not None:
-                tb, _ = tangent(Yp[:-1].reshape(shape) * us, Yp[-1] * ws, evp, t, ref_sign)
-                Yc = Y_of(Uc, wc)
-                ok, Uc, wc, ev, it = corrector(Yc + ds * tb, tb)
-                total_it += it
-                if ok and np.linalg.norm(Y_of(Uc, wc) - Y) > 1e-3 * ds:
-                    break
-            ds *= 0.5
-            if ds < ds_min:
-                raise ConvergenceError(f"continuation step fell below ds_min near omega = {w:.6g} rad/s",
-                                       float(np.linalg.norm(ev[0]) / ev[4]))
-        U, w = Uc, wc
-        t, sgn = tangent(U, w, ev, t, ref_sign)
-        R, g, nl, Dg, scale = ev
-        sols.append(hb.make_solution(w, force, U, float(np.linalg.norm(R) / scale), it, nl.size,
-                                     g=g, jac=(nl, Dg) if keep_jac else None))
-        amp_prev = sols[-1].amplitude(dof)
-        taus.append(t[-1])
-        if it <= 3:
-            ds = min(ds * 1.5, ds_max)
-        elif it >= 7:
-            ds *= 0.7
-        if (w - w1) * direction >= 0:
-            # land exactly on omega_end from the last point
-            try:
-                sols[-1] = hb.solve(w1, force, guess=sols[-1])
-            except ConvergenceError:
-                pass
-            break
-        if (w - w0) * direction < -abs(w1 - w0):
-            break
-        amps.append(amp_prev)
-        if stop is not None and stop(amps):
-            break
-    omega = np.array([s_.omega for s_ in sols])
-    amp = np.array([s_.amplitude(dof) for s_ in sols])
-    taus = np.array(taus)
-    turning = [i for i in range(1, len(taus)) if np.sign(taus[i]) != np.sign(taus[i - 1])]
-    method = stability
-    if stability == "auto":
-        method = "hill" if stab.hill_available(hb) else "fold"
-    if method == "hill":
-        stable = np.array([stab.is_stable_hill(hb, s_) for s_ in sols])
-    elif method == "fold":
-        flips = np.zeros(len(sols), dtype=int)
-        for i in turning:
-            flips[i:] += 1
-        stable = flips % 2 == 0
-        method = "fold-parity"
-    else:
-        stable = np.ones(len(sols), dtype=bool)
-    return FRFResult(omega, amp, stable, sols, turning, method, time.perf_counter() - t0, total_it)
+    branch = _Branch(hb, force, dof, w0, w1, settings, guess)
+    branch.run(stop)
+    return branch.result(t0)

@@ -35,12 +35,14 @@ reached when it stalls.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .continuation import ContinuationSettings, FRFResult, continue_frf
 from .errors import ConvergenceError
 from .fourier import Fourier
 from .friction import FrictionContacts
@@ -170,13 +172,23 @@ class HarmonicBalance:
         self.stats = {"residuals": 0, "linear_solves": 0, "gmres_iterations": 0}
 
     # ------------------------------------------------------------------ layouts
-    def _to_el(self, U: np.ndarray) -> np.ndarray:
+    def to_contact(self, U: np.ndarray) -> np.ndarray:
+        """Unknowns in the element layout of ``Solution.contact`` (a view when U is contiguous).
+
+        Args:
+            U: (n_H, n_c) contact relative harmonics, n_c = 3 n_e (t1, t2, n per element), mm.
+
+        Returns:
+            (n_e, 3, n_H) array: per element and direction, the harmonics [a0, a1, b1, ...], mm.
+        """
         return U.reshape(self.nH, self.ne, 3).transpose(1, 2, 0)
 
-    def _from_el(self, X: np.ndarray) -> np.ndarray:
+    def from_contact(self, X: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`to_contact`: (n_e, 3, n_H) element layout -> (n_H, n_c) unknowns, mm."""
         return X.transpose(2, 0, 1).reshape(self.nH, -1)
 
-    def _check_force(self, force) -> np.ndarray:
+    def check_force(self, force) -> np.ndarray:
+        """Validated force amplitude: a finite float array of shape (n,), N (else ValueError)."""
         f = np.asarray(force, dtype=float)
         if f.shape != (self.s.n,):
             raise ValueError(f"force must have shape ({self.s.n},), got {f.shape}")
@@ -185,7 +197,8 @@ class HarmonicBalance:
         return f
 
     @staticmethod
-    def _check_omega(omega) -> float:
+    def check_omega(omega) -> float:
+        """Validated excitation frequency as a float, rad/s: finite and > 0 (else ValueError)."""
         if not np.isfinite(omega) or omega <= 0:
             raise ValueError(f"omega must be a finite frequency > 0 rad/s, got {omega!r}")
         return float(omega)
@@ -224,8 +237,8 @@ class HarmonicBalance:
     def residual(self, U: np.ndarray, omega: float, Ul: np.ndarray, jacobian: bool = True):
         """R = U - U_lin + G g(U); returns R, g, nonlinear element indices, their dg/dU blocks."""
         self.stats["residuals"] += 1
-        F, nl, DF = self.c.evaluate(self._to_el(U), self.fourier, jacobian)
-        g = self._from_el(F) - self.k0[None, :] * U
+        F, nl, DF = self.c.evaluate(self.to_contact(U), self.fourier, jacobian)
+        g = self.from_contact(F) - self.k0[None, :] * U
         R = U - Ul + self.gapply(omega, g)
         Dg = None
         if jacobian and nl.size:
@@ -288,7 +301,7 @@ class HarmonicBalance:
         k, nH = nl.size, self.nH
         ge = np.einsum("kxy,ky->kx", Dg, xN[idx])
         gfull = np.zeros((nH, self.nc))
-        gfull[:, cn] = self._from_el(ge.reshape(k, 3, nH))
+        gfull[:, cn] = self.from_contact(ge.reshape(k, 3, nH))
         return self.gapply(omega, gfull)
 
     def _krylov(self, matvec, prec, B, P):
@@ -476,11 +489,11 @@ class HarmonicBalance:
                       it: int, nnl: int, g: np.ndarray | None = None, jac=None) -> Solution:
         """Solution object; structure DOFs are recovered from the contact harmonics on demand."""
         if g is None:
-            F, _, _ = self.c.evaluate(self._to_el(U), self.fourier, jacobian=False)
-            g = self._from_el(F) - self.k0[None, :] * U
+            F, _, _ = self.c.evaluate(self.to_contact(U), self.fourier, jacobian=False)
+            g = self.from_contact(F) - self.k0[None, :] * U
         y = -(self.B.T @ g.T).T                                 # (nH, n) forces on the structure
         y[1] += force
-        sol = Solution(omega, None, self._to_el(U).copy(), res, it, nnl, recover=(self, y))
+        sol = Solution(omega, None, self.to_contact(U).copy(), res, it, nnl, recover=(self, y))
         sol._jac = jac
         return sol
 
@@ -518,9 +531,9 @@ class HarmonicBalance:
         Returns:
             Solution (raises ConvergenceError if Newton fails).
         """
-        omega = self._check_omega(omega)
-        force = self._check_force(force)
-        U0 = self.ulin(omega, force) if guess is None else self._from_el(guess.contact)
+        omega = self.check_omega(omega)
+        force = self.check_force(force)
+        U0 = self.ulin(omega, force) if guess is None else self.from_contact(guess.contact)
         U, res, it, nnl = self.newton(omega, force, U0)
         g, jac = self._last
         return self.make_solution(omega, force, U, res, it, nnl, g=g, jac=jac)
@@ -538,7 +551,33 @@ class HarmonicBalance:
         return ElementResults(hist["status"], W, hist["N"].mean(axis=1), hist["slip_fraction"],
                               hist["u_t"], hist["T"], hist["N"], t)
 
-    def frf(self, omega_start: float, omega_end: float, force, dof: int, **kw):
-        """Frequency response by pseudo-arc-length continuation; see ``continuation.continue_frf``."""
-        from .continuation import continue_frf
-        return continue_frf(self, omega_start, omega_end, force, dof, **kw)
+    def frf(self, omega_start: float, omega_end: float, force, dof: int, *,
+            settings: ContinuationSettings | None = None, guess: Solution | None = None,
+            stop: Callable[[list], bool] | None = None, **options) -> FRFResult:
+        """Frequency response by pseudo-arc-length continuation (``continuation.continue_frf``).
+
+        The step and stopping settings come either from ``settings`` or from keyword ``options``
+        named like its fields (``max_points=``, ``ds=``, ``ds_max=``, ``ds_min=``,
+        ``max_corrector=``, ``stability=``, ``max_domega=``, ``max_damp=``; None means the
+        default), never from both: giving both raises TypeError, so no setting is silently
+        overridden. Either way they are validated by :class:`ContinuationSettings`.
+
+        Args:
+            omega_start, omega_end: frequency range, rad/s (either order).
+            force: (n,) amplitude of force·cos(wt), N.
+            dof: response DOF of ``FRFResult.amplitude``.
+            settings: a ContinuationSettings.
+            guess: optional Solution (or object with ``.contact``) to start Newton from at
+                omega_start; default the linear-base response.
+            stop: optional callable(amplitudes so far, mm) -> bool; True ends the branch there.
+            **options: ContinuationSettings fields, when ``settings`` is not given.
+
+        Returns:
+            FRFResult (ConvergenceError if the step falls below ds_min).
+        """
+        if settings is not None and options:
+            raise TypeError("frf: give either settings= or the keyword options "
+                            f"({', '.join(sorted(options))}), not both")
+        if settings is None:
+            settings = ContinuationSettings.from_options(**options)
+        return continue_frf(self, omega_start, omega_end, force, dof, settings, guess=guess, stop=stop)

@@ -41,7 +41,7 @@ def floquet_exponents(hb, sol) -> np.ndarray:
     s, nH, n, w = hb.s, hb.nH, hb.s.n, sol.omega
     jac = getattr(sol, "_jac", None)
     if jac is None:
-        U = hb._from_el(sol.contact)
+        U = hb.from_contact(sol.contact)
         _, _, nl, Dg = hb.residual(U, w, hb.ulin(w, np.zeros(n)), jacobian=True)
     else:
         nl, Dg = jac

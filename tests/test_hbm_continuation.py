@@ -1,7 +1,11 @@
-"""Continuation: fold passing with Hill stability; FRF vs the closed form along a whole curve."""
-import numpy as np
+"""Continuation: fold passing with Hill stability; FRF vs the closed form along a whole curve;
+settings validation and the settings=/keywords equivalence."""
+import dataclasses
 
-from hbm import FrictionContacts, HarmonicBalance, LinearStructure
+import numpy as np
+import pytest
+
+from hbm import ContinuationSettings, FrictionContacts, HarmonicBalance, LinearStructure
 from hbm.reference import jenkins_frf_h1
 
 
@@ -66,3 +70,56 @@ def test_lightly_damped_linear_peak_is_resolved():
             for i in range(2))[0]
     assert len(frf.omega) >= 100
     assert abs(frf.amplitude.max() - np.abs(H).max()) <= 0.02 * np.abs(H).max()
+
+
+def softening_oscillator(harmonics=3, samples=64):
+    """1-DOF mass on a preloaded normal contact that opens (stiffness 4 closed, 1 open): folds."""
+    s = LinearStructure([[1.0]], [[1.0]], [[0.1]])
+    c = FrictionContacts(np.array([[[-1, -1, 0], [-1, -1, -1]]]), kt=1.0, kn=3.0, mu=0.5, n0=0.1)
+    return HarmonicBalance(s, c, harmonics=harmonics, samples=samples)
+
+
+@pytest.mark.parametrize("name, value", [
+    ("max_points", 0), ("max_points", 2.5), ("ds", 0.0), ("ds", np.inf), ("ds_max", -0.1),
+    ("ds_min", 0.0), ("max_corrector", 0), ("stability", "floquet"), ("max_domega", 0.0),
+    ("max_domega", np.nan), ("max_damp", -1.0), ("max_damp", np.inf)])
+def test_settings_validation_names_the_field(name, value):
+    with pytest.raises(ValueError, match=rf"ContinuationSettings\.{name} must be"):
+        ContinuationSettings(**{name: value})
+    # frf's keywords go through the same validation
+    with pytest.raises(ValueError, match=rf"ContinuationSettings\.{name} must be"):
+        softening_oscillator(1, 16).frf(0.6, 2.6, np.array([0.1]), dof=0, **{name: value})
+
+
+def test_settings_defaults_frozen_and_one_source_only():
+    s = ContinuationSettings(ds=0.04)
+    assert s.ds_min == 1e-6 * 0.04 and s.max_domega is None and s.frequency_cap(3.0, 1.0) == 0.02
+    assert ContinuationSettings.from_options(ds=None, max_domega=None) == ContinuationSettings()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.ds = 0.1
+    hb = softening_oscillator(1, 16)
+    with pytest.raises(TypeError, match="not both"):
+        hb.frf(0.6, 2.6, np.array([0.1]), dof=0, settings=s, ds_max=0.2)
+    with pytest.raises(TypeError, match="ContinuationSettings"):
+        hb.frf(0.6, 2.6, np.array([0.1]), dof=0, settings={"ds": 0.04})
+
+
+def test_settings_and_keywords_give_identical_branches():
+    """The same options as keywords or as ContinuationSettings: bitwise the same branch, through
+    folds, with guess= and stop= as fe_joint uses them."""
+    opts = dict(max_points=400, ds=0.03, ds_max=0.2, ds_min=1e-7, max_corrector=10, stability="fold",
+                max_domega=0.02, max_damp=0.2)
+    f = np.array([0.1])
+    branches = []
+    for kw in (opts, {"settings": ContinuationSettings(**opts)}):
+        hb = softening_oscillator()
+        guess = hb.solve(0.6, 0.9 * f)
+        branches.append(hb.frf(0.6, 2.6, f, dof=0, guess=guess, stop=lambda a: len(a) >= 100, **kw))
+    a, b = branches
+    assert len(a.turning_points) >= 2 and a.method == "fold-parity" and (~a.stable).any()
+    assert len(a.omega) == 100           # stop() ended the branch (it reaches 2.6 after 116)
+    for name in ("omega", "amplitude", "stable"):
+        assert np.array_equal(getattr(a, name), getattr(b, name))
+    assert a.turning_points == b.turning_points and a.newton_iterations == b.newton_iterations
+    assert np.array_equal(np.stack([s_.contact for s_ in a.solutions]),
+                          np.stack([s_.contact for s_ in b.solutions]))
