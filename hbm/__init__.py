@@ -1,6 +1,6 @@
 """hbm — multiharmonic balance with 3D friction elements (numpy/scipy only).
 
-Public API (DESIGN §5)::
+Public API (docs/design.md, "Public API")::
 
     from hbm import LinearStructure, FrictionContacts, HarmonicBalance
     s = LinearStructure(M, K, C)                 # or damping_ratio=0.001

@@ -1,6 +1,6 @@
 """Truncated Fourier series and the alternating frequency/time (AFT) transforms.
 
-Real coefficient ordering (DESIGN §3): ``[a0, a1, b1, a2, b2, ...]`` with
+Real coefficient ordering (docs/design.md, "Units and conventions"): ``[a0, a1, b1, a2, b2, ...]`` with
 ``x(t) = a0 + sum_h a_h cos(h w t) + b_h sin(h w t)``; ``n_H = 2H + 1`` coefficients.
 Samples are ``theta_j = 2 pi j / n_t`` (j = 0..n_t-1) over one period.
 """

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hbm import ConvergenceError, FrictionContacts, HarmonicBalance, LinearStructure
+from hbm import (ContinuationSettings, ConvergenceError, FrictionContacts, HarmonicBalance,
+                 LinearStructure)
 
 from ..model.joint import JointModel
 from .artifacts import CurveKey
@@ -47,6 +48,16 @@ class SweepSettings:
     band: tuple[float, float]
     max_points: int
     mu: float
+
+    def continuation(self, w0: float, w1: float) -> ContinuationSettings:
+        """hbm's continuation settings of a full sweep over [w0, w1] rad/s.
+
+        Step guards: at most 1/50 of the band per step and at most 25 % change of the response
+        amplitude per step (hbm's defaults, 1/100 and 10 %, doubled the points for the same peak
+        to 0.01 % on the quick model).
+        """
+        return ContinuationSettings(max_points=self.max_points, max_domega=(w1 - w0) / 50,
+                                    max_damp=0.25)
 
     @classmethod
     def from_case(cls, case) -> "SweepSettings":
@@ -181,11 +192,7 @@ def _sweep(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSet
     hb, force, act = _setup(rm, joint, level, settings, tols)
     max_points = settings.max_points
     w0, w1 = 2 * np.pi * f_lin * settings.band[0], 2 * np.pi * f_lin * settings.band[1]
-    # step guards: at most 1/50 of the band per step, and at most 25 % change of the response
-    # amplitude per step (hbm's defaults, 1/100 and 10 %, doubled the points for the same peak
-    # to 0.01 % on the quick model)
-    res = hb.frf(w0, w1, force, dof=rm.response_dof, max_points=max_points,
-                 max_domega=(w1 - w0) / 50, max_damp=0.25)
+    res = hb.frf(w0, w1, force, dof=rm.response_dof, settings=settings.continuation(w0, w1))
     # a branch that stops short of the band end may miss the peak: say so, never report it
     if res.omega[-1] < w1 * (1 - 1e-9):
         why = ("raise dynamics.max_points" if len(res.omega) >= max_points else
@@ -244,6 +251,9 @@ def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.nda
         start = SimpleNamespace(contact=guess[act])   # elements new to the set start at rest
     w = 2 * np.pi * f_guess
     dof = rm.response_dof
+    # small steps (≤ 0.1 % in frequency, ≤ 5 % in amplitude) near a peak that moved little
+    local = ContinuationSettings(max_points=max_points, max_domega=w * 1e-3, max_damp=0.05,
+                                 stability="none")
 
     def passed(amps):
         # two points beyond a maximum and 1 % below it (small bumps of the sampled friction
@@ -256,9 +266,8 @@ def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.nda
     # that way, towards higher ones; the two pieces joined at the start bracket the maximum
     pieces, its = [], 0
     for direction in (-1.0, 1.0):
-        res = hb.frf(w, w * (1 + direction * PEAK_WINDOW), force, dof=dof, max_points=max_points,
-                     max_domega=w * 1e-3, max_damp=0.05, guess=start, stop=passed,
-                     stability="none")
+        res = hb.frf(w, w * (1 + direction * PEAK_WINDOW), force, dof=dof, settings=local,
+                     guess=start, stop=passed)
         its += res.newton_iterations
         pieces.append(res)
         if int(np.argmax(res.amplitude)) > 0:
