@@ -57,6 +57,94 @@ def _kuhn_tets(nx: int, ny: int, nz: int) -> np.ndarray:
     return np.stack(tets, axis=1).reshape(-1, 4)
 
 
+def _check_lengths(half, thickness, cell, shank_half, hole_half, head) -> None:
+    for name, val in (("half", half), ("thickness", thickness), ("cell", cell),
+                      ("shank_half", shank_half), ("hole_half", hole_half), ("head", head)):
+        if not np.isfinite(val) or val <= 0:
+            raise ValueError(f"{name} must be a finite positive length in mm, got {val}")
+    if not shank_half < hole_half < half or not head < thickness:
+        raise ValueError("need 0 < shank_half < hole_half < half and head < thickness")
+
+
+def _marked_tets(pts, nx, ny, nz, thickness, shank_half, hole_half, head):
+    """Kuhn tets of the hex grid with part markers; the hole's empty annulus removed."""
+    tets = _kuhn_tets(nx, ny, nz)
+    hc = pts[tets].mean(axis=1)  # tet centroid; classify by the centroid of its hex instead:
+    hex_c = hc.reshape(-1, 6, 3).mean(axis=1).repeat(6, axis=0)
+    in_hole = (np.abs(hex_c[:, 0]) < hole_half) & (np.abs(hex_c[:, 1]) < hole_half)
+    in_shank = (np.abs(hex_c[:, 0]) < shank_half) & (np.abs(hex_c[:, 1]) < shank_half)
+    zc = hex_c[:, 2]
+    marker = np.where(zc < 0, 1, 2)
+    marker = np.where(in_hole & (zc > thickness - head), 4, marker)
+    marker = np.where(in_hole & (zc < -(thickness - head)), 5, marker)
+    mid = in_hole & (np.abs(zc) < thickness - head)
+    marker = np.where(mid & in_shank, 3, marker)
+    keep = ~(mid & ~in_shank)
+    return tets[keep], marker[keep]
+
+
+def _tet10(pts, tets):
+    """Tet10 cells (one node per unique edge), unused nodes dropped and renumbered."""
+    edges = np.sort(tets[:, _TET10_EDGES], axis=2).reshape(-1, 2)
+    uedges, inv = np.unique(edges, axis=0, return_inverse=True)
+    mid_pts = 0.5 * (pts[uedges[:, 0]] + pts[uedges[:, 1]])
+    cells = np.hstack([tets, len(pts) + inv.reshape(-1, 6)])
+    pts = np.vstack([pts, mid_pts])
+    used = np.unique(cells)
+    remap = -np.ones(len(pts), dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    return pts[used], remap[cells]
+
+
+def _split_lap(pts, cells, marker, on_plane):
+    """Duplicate the lap nodes used by plate B (B gets copies); pairs in x-then-y order.
+
+    Returns:
+        (points, cells, pair_nodes, copy: original node → its B copy or -1).
+    """
+    b_nodes = np.unique(cells[marker == 2])
+    lap_b_src = b_nodes[on_plane[b_nodes]]
+    copy = -np.ones(len(pts), dtype=np.int64)
+    copy[lap_b_src] = len(pts) + np.arange(len(lap_b_src))
+    cb = cells[marker == 2]
+    cells[marker == 2] = np.where(copy[cb] >= 0, copy[cb], cb)
+    pts = np.vstack([pts, pts[lap_b_src]])
+    pair_nodes = np.stack([lap_b_src, copy[lap_b_src]], axis=1)
+    # canonical pair order: by x then y (independent of numbering details)
+    order = np.lexsort((pts[pair_nodes[:, 0], 1], pts[pair_nodes[:, 0], 0]))
+    return pts, cells, pair_nodes[order], copy
+
+
+def _lap_facets(pts, cells, marker, on_plane, copy):
+    """Tri6 lap facets of plate A (tet faces with three vertices on z = 0) and their B copies."""
+    a_cells = cells[marker == 1]
+    faces = a_cells[:, _TET_FACES]  # (nA, 4, 3)
+    flat = np.all(on_plane[faces], axis=2)
+    tri_v = faces[flat]
+    # mid-edge nodes through the global edge -> node map of the A cells
+    cell_edges = np.sort(np.stack([a_cells[:, _TET10_EDGES[:, 0]], a_cells[:, _TET10_EDGES[:, 1]]],
+                                  axis=2), axis=2).reshape(-1, 2)
+    cell_edge_nodes = a_cells[:, 4:].ravel()
+    key = cell_edges[:, 0] * len(pts) + cell_edges[:, 1]
+    ukey, first = np.unique(key, return_index=True)
+    tri_e = np.sort(tri_v[:, _TRI6_EDGES], axis=2)
+    tkey = tri_e[:, :, 0] * len(pts) + tri_e[:, :, 1]
+    tri_m = cell_edge_nodes[first[np.searchsorted(ukey, tkey)]]
+    tri_a = np.hstack([tri_v, tri_m])
+    tri_b = np.where(copy[tri_a] >= 0, copy[tri_a], tri_a)
+    return tri_a, tri_b
+
+
+def _tributary_areas(pts, tri_a, pair_a):
+    """Pair areas: vertex A/12, mid-edge A/4 of each lap triangle, mm²."""
+    p = pts[tri_a]
+    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    node_area = np.zeros(len(pts))
+    np.add.at(node_area, tri_a[:, :3], (area / 12)[:, None])
+    np.add.at(node_area, tri_a[:, 3:], (area / 4)[:, None])
+    return node_area[pair_a]
+
+
 def build_box_joint(half: float = 10.0, thickness: float = 4.0, cell: float = 2.0,
                     shank_half: float = 2.0, hole_half: float = 4.0,
                     head: float | None = None) -> ResonatorMesh:
@@ -75,12 +163,7 @@ def build_box_joint(half: float = 10.0, thickness: float = 4.0, cell: float = 2.
         tributary areas (vertex A/12, mid-edge A/4), excitation/response nodes on plate A.
     """
     head = cell if head is None else head
-    for name, val in (("half", half), ("thickness", thickness), ("cell", cell),
-                      ("shank_half", shank_half), ("hole_half", hole_half), ("head", head)):
-        if not np.isfinite(val) or val <= 0:
-            raise ValueError(f"{name} must be a finite positive length in mm, got {val}")
-    if not shank_half < hole_half < half or not head < thickness:
-        raise ValueError("need 0 < shank_half < hole_half < half and head < thickness")
+    _check_lengths(half, thickness, cell, shank_half, hole_half, head)
     nx = ny = int(round(2 * half / cell))
     nz = int(round(2 * thickness / cell))
     if nz % 2 or ny % 2:
@@ -89,74 +172,14 @@ def build_box_joint(half: float = 10.0, thickness: float = 4.0, cell: float = 2.
     zs = np.linspace(-thickness, thickness, nz + 1)
     gx, gy, gz = np.meshgrid(xs, xs, zs, indexing="ij")
     pts = np.stack([gx.ravel(), gy.ravel(), gz.ravel()], axis=1)
-
-    tets = _kuhn_tets(nx, ny, nz)
-    hc = pts[tets].mean(axis=1)  # tet centroid; classify by the centroid of its hex instead:
-    hex_c = hc.reshape(-1, 6, 3).mean(axis=1).repeat(6, axis=0)
-    in_hole = (np.abs(hex_c[:, 0]) < hole_half) & (np.abs(hex_c[:, 1]) < hole_half)
-    in_shank = (np.abs(hex_c[:, 0]) < shank_half) & (np.abs(hex_c[:, 1]) < shank_half)
-    zc = hex_c[:, 2]
-    marker = np.where(zc < 0, 1, 2)
-    marker = np.where(in_hole & (zc > thickness - head), 4, marker)
-    marker = np.where(in_hole & (zc < -(thickness - head)), 5, marker)
-    mid = in_hole & (np.abs(zc) < thickness - head)
-    marker = np.where(mid & in_shank, 3, marker)
-    keep = ~(mid & ~in_shank)
-    tets, marker = tets[keep], marker[keep]
-
-    # tet10: one node per unique edge
-    edges = np.sort(tets[:, _TET10_EDGES], axis=2).reshape(-1, 2)
-    uedges, inv = np.unique(edges, axis=0, return_inverse=True)
-    mid_pts = 0.5 * (pts[uedges[:, 0]] + pts[uedges[:, 1]])
-    cells = np.hstack([tets, len(pts) + inv.reshape(-1, 6)])
-    pts = np.vstack([pts, mid_pts])
-
-    # drop unused nodes, renumber
-    used = np.unique(cells)
-    remap = -np.ones(len(pts), dtype=np.int64)
-    remap[used] = np.arange(len(used))
-    pts, cells = pts[used], remap[cells]
-
-    # duplicate the lap nodes (z = 0, used by plate B cells): B gets copies
+    tets, marker = _marked_tets(pts, nx, ny, nz, thickness, shank_half, hole_half, head)
+    pts, cells = _tet10(pts, tets)
     on_plane = np.abs(pts[:, 2]) < 1e-9 * thickness
-    b_nodes = np.unique(cells[marker == 2])
-    lap_b_src = b_nodes[on_plane[b_nodes]]
-    copy = -np.ones(len(pts), dtype=np.int64)
-    copy[lap_b_src] = len(pts) + np.arange(len(lap_b_src))
-    cb = cells[marker == 2]
-    cells[marker == 2] = np.where(copy[cb] >= 0, copy[cb], cb)
-    pts = np.vstack([pts, pts[lap_b_src]])
-    pair_nodes = np.stack([lap_b_src, copy[lap_b_src]], axis=1)
-    # canonical pair order: by x then y (independent of numbering details)
-    order = np.lexsort((pts[pair_nodes[:, 0], 1], pts[pair_nodes[:, 0], 0]))
-    pair_nodes = pair_nodes[order]
-
-    # lap-face triangles of plate A: tet faces with three vertices on z = 0
-    a_cells = cells[marker == 1]
-    faces = a_cells[:, _TET_FACES]  # (nA, 4, 3)
-    flat = np.all(on_plane[faces], axis=2)
-    tri_v = faces[flat]
-    # mid-edge nodes through the global edge -> node map of the A cells
-    cell_edges = np.sort(np.stack([a_cells[:, _TET10_EDGES[:, 0]], a_cells[:, _TET10_EDGES[:, 1]]],
-                                  axis=2), axis=2).reshape(-1, 2)
-    cell_edge_nodes = a_cells[:, 4:].ravel()
-    key = cell_edges[:, 0] * len(pts) + cell_edges[:, 1]
-    ukey, first = np.unique(key, return_index=True)
-    tri_e = np.sort(tri_v[:, _TRI6_EDGES], axis=2)
-    tkey = tri_e[:, :, 0] * len(pts) + tri_e[:, :, 1]
-    tri_m = cell_edge_nodes[first[np.searchsorted(ukey, tkey)]]
-    tri_a = np.hstack([tri_v, tri_m])
-    tri_b = np.where(copy[tri_a] >= 0, copy[tri_a], tri_a)
+    pts, cells, pair_nodes, copy = _split_lap(pts, cells, marker, on_plane)
+    tri_a, tri_b = _lap_facets(pts, cells, marker, on_plane, copy)
     facets = np.vstack([tri_a, tri_b])
     facet_markers = np.r_[np.full(len(tri_a), 11), np.full(len(tri_b), 12)]
-
-    # tributary areas: vertex A/12, mid-edge A/4 of each triangle
-    p = pts[tri_a]
-    area = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    node_area = np.zeros(len(pts))
-    np.add.at(node_area, tri_a[:, :3], (area / 12)[:, None])
-    np.add.at(node_area, tri_a[:, 3:], (area / 4)[:, None])
-    pair_area = node_area[pair_nodes[:, 0]]
+    pair_area = _tributary_areas(pts, tri_a, pair_nodes[:, 0])
 
     def nearest(target, among):
         return int(among[np.argmin(np.linalg.norm(pts[among] - target, axis=1))])
