@@ -101,6 +101,47 @@ def test_any_rq_the_case_accepts_runs(run: Path, tmp_path: Path) -> None:
     assert "1.2345678" in (out / "report.md").read_text()
 
 
+def test_energy_balances_at_every_point_of_a_resonator_curve(run: Path) -> None:
+    """At every point of a resonator FRF through the top level's peak (most elements slipping or
+    opening) the work of the excitation per cycle equals the viscous plus the friction dissipation:
+    the invariant of a Galerkin harmonic balance, to the Newton tolerance. H = 3 so that the
+    higher harmonics' work counts; viscous work from the modal damping of the linear base."""
+    from hbm import HarmonicBalance
+    from fe_joint.model.reduced_model import ReducedModel
+    from fe_joint.study import contact as ms
+    from fe_joint.study.configurations import joint_baseline
+    from fe_joint.study.frf import contacts, structure
+    case = load_case(preset="quick")
+    rm = ReducedModel.load(str(run / "fe" / "reduced_model.h5"))
+    setup = ms.interface_setup(rm, case.geometry, case.material, case.roughness)
+    joint = joint_baseline(setup, case.contact.k_ref)
+    s = _summary(run)
+    level, f_peak = s["levels_N"][-1], s["peaks"]["baseline@L2"]["peak_hz"]
+    c, _ = contacts(rm, joint, case.contact.mu)
+    H = 3
+    hb = HarmonicBalance(structure(rm), c, harmonics=H, samples=64, tol=1e-10, krylov_tol=1e-12)
+    force = np.zeros(rm.K.shape[0])
+    force[rm.excitation_dof] = level
+    w = 2 * np.pi * f_peak
+    res = hb.frf(0.985 * w, 1.015 * w, force, dof=rm.response_dof, max_points=40)
+    G = hb.G
+    MPhi = rm.M @ G.Phi
+    rel, share = [], []
+    for sol in res.solutions:
+        X = sol.coefficients
+        w_in = np.pi * force @ X[2]
+        w_visc = 0.0
+        for h in range(1, H + 1):
+            eta = MPhi.T @ (X[2 * h - 1] - 1j * X[2 * h])      # modal coordinates of harmonic h
+            w_visc += np.pi * h**2 * sol.omega * float(np.sum(G.cvec * np.abs(eta) ** 2))
+        w_fric = hb.element_results(sol).energy.sum()
+        rel.append(abs(w_in - w_visc - w_fric) / w_in)
+        share.append(w_fric / w_in)
+    assert len(rel) >= 10
+    assert max(rel) <= 1e-6, max(rel)
+    assert max(share) > 0.2            # friction carries a real share of the dissipation
+
+
 def test_finished_stages_not_recomputed(run: Path) -> None:
     log = [(e["stage"], e["action"]) for e in read_stage_log(run)]
     assert log[0] == ("mesh", "ran")
