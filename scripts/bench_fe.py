@@ -6,11 +6,15 @@ Prints markdown tables (rank 0):
    (assembly, K_II factorization, fixed-interface modes, constraint modes + projection, preload,
    full-model modes), total, peak memory (sum over ranks), breathing-mode frequency (untied and
    with the closed pairs stuck at k = 6e4 N/mm³) and the preload pressure at a fixed point;
-2. with ``--degree-study``: P1 vs P2 breathing frequency vs DOFs (the element-degree choice).
+2. with ``--degree-study``: P1 vs P2 breathing frequency vs DOFs (the element-degree choice);
+3. with ``--stuck`` (instead of table 1): the stuck resonance of the reduced model (baseline
+   springs k_n = k_t = k_ref on the loaded pairs, as the study computes it) against the full FE
+   model with the same springs (``fe_joint.fe.stuck``), with the time of each.
 
 Usage:
     scripts/bench_fe.py                       # coarse + default, 1 and 2 ranks
     scripts/bench_fe.py --sizes coarse default fine --ranks 1 2 --degree-study
+    scripts/bench_fe.py --stuck --sizes quick default --ranks 1
 The parent process launches ``mpirun -n R`` workers and gathers their JSON lines.
 """
 from __future__ import annotations
@@ -23,6 +27,7 @@ import sys
 import time
 
 SIZES = {
+    "quick": dict(lap_mesh_size=4.0, body_mesh_size=14.0),  # the quick preset's mesh
     "coarse": dict(lap_mesh_size=4.0, body_mesh_size=14.0, leaf_mesh_size=6.0),
     "medium": dict(lap_mesh_size=3.4, body_mesh_size=9.0, leaf_mesh_size=5.0),
     "default": dict(),
@@ -99,6 +104,40 @@ def degree_worker(size: str, degree: int) -> None:
                                         time_s=time.perf_counter() - t)), flush=True)
 
 
+def stuck_worker(size: str, cutoff: float, chunk: int) -> None:
+    """Reduced vs full stuck resonance (baseline springs) on one mesh size; rank 0 prints JSON."""
+    import dataclasses
+
+    from mpi4py import MPI
+
+    from fe_joint.case import load_case
+    from fe_joint.fe.assembly import assemble_joint
+    from fe_joint.fe.mesh import load_resonator
+    from fe_joint.fe.reduction import build_reduced_model_from_fe
+    from fe_joint.fe.stuck import compare_stuck_resonance
+    from fe_joint.study.configurations import joint_baseline
+    from fe_joint.study.contact import interface_setup
+
+    comm = MPI.COMM_WORLD
+    case = load_case()
+    geo = dataclasses.replace(case.geometry, **SIZES[size])
+    fe = load_resonator(geo, comm)
+    t = time.perf_counter()
+    rm = build_reduced_model_from_fe(fe, case.material, case.preload.bolt_force,
+                                     case.reduction.damping_ratio, cutoff, chunk=chunk or None,
+                                     n_full_elastic=0)
+    reduction_s = time.perf_counter() - t
+    t = time.perf_counter()
+    problem = assemble_joint(fe, case.material)
+    assembly_s = time.perf_counter() - t
+    joint = joint_baseline(interface_setup(rm, geo, case.material, case.roughness), case.contact.k_ref)
+    cmp = compare_stuck_resonance(problem, rm, joint)
+    if comm.rank == 0:
+        print("JSON " + json.dumps(dict(size=size, ranks=comm.size, dofs=problem.n_dofs, pairs=rm.n_pairs,
+                                        loaded=int(joint.closed.sum()), reduced_dofs=rm.n_dofs,
+                                        reduction_s=reduction_s, assembly_s=assembly_s, **cmp)), flush=True)
+
+
 def launch(ranks: int, args: list[str]) -> dict:
     """Run this script as a worker under mpirun; return its JSON result."""
     env = dict(os.environ, OMP_NUM_THREADS="1", OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
@@ -113,6 +152,29 @@ def launch(ranks: int, args: list[str]) -> dict:
     raise RuntimeError(f"worker {' '.join(args)} failed:\n{res.stdout[-2000:]}\n{res.stderr[-3000:]}")
 
 
+def stuck_table(a: argparse.Namespace) -> None:
+    """Run the stuck-resonance workers and print their markdown table."""
+    rows = []
+    for size in a.sizes:
+        for r in a.ranks:
+            rows.append(launch(r, ["--worker", size, "--stuck-worker", "--cutoff", str(a.cutoff),
+                                   "--chunk", str(a.chunk)]))
+            print(f"<!-- done {size} x{r}: {rows[-1]['wall_s']:.1f} s -->", flush=True)
+    print("Stuck resonance (baseline: k_n = k_t = k_ref on the loaded pairs): Craig–Bampton reduced "
+          "model vs the full FE model with the same pair springs (SLEPc shift-invert at the reduced "
+          "frequency, mode matched by MAC at the boundary DOFs)")
+    print()
+    print("| mesh | ranks | DOFs | pairs (loaded) | reduced DOFs | f reduced Hz | f full Hz | "
+          "reduced / full − 1 | MAC | reduction s | reduced eigen s | full assembly s | "
+          "full springs + eigen s |")
+    print("|" + "---|" * 13)
+    for o in rows:
+        print(f"| {o['size']} | {o['ranks']} | {o['dofs']} | {o['pairs']} ({o['loaded']}) | "
+              f"{o['reduced_dofs']} | {o['f_reduced']:.6f} | {o['f_full']:.6f} | {o['rel_diff']:.1e} | "
+              f"{o['mac']:.6f} | {o['reduction_s']:.1f} | {o['reduced_s']:.2f} | {o['assembly_s']:.1f} | "
+              f"{o['full_s']:.1f} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", nargs="+", default=["coarse", "default"], choices=list(SIZES))
@@ -122,13 +184,20 @@ def main() -> None:
     ap.add_argument("--degree-study", action="store_true", help="also tabulate P1 vs P2 convergence")
     ap.add_argument("--degree-sizes", nargs="+", default=["coarse", "medium", "default", "fine"],
                     choices=list(SIZES))
+    ap.add_argument("--stuck", action="store_true",
+                    help="only the stuck-resonance table: reduced vs full FE model with the baseline springs")
+    ap.add_argument("--stuck-worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--worker", choices=list(SIZES), help=argparse.SUPPRESS)
     ap.add_argument("--degree-worker", type=int, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.worker and a.degree_worker:
         return degree_worker(a.worker, a.degree_worker)
+    if a.worker and a.stuck_worker:
+        return stuck_worker(a.worker, a.cutoff, a.chunk)
     if a.worker:
         return worker(a.worker, a.cutoff, a.chunk)
+    if a.stuck:
+        return stuck_table(a)
 
     rows = []
     for size in a.sizes:
