@@ -14,6 +14,7 @@ from ..case.schema import CONFIGURATIONS
 from ..study.artifacts import rq_label
 from ..study.frf import CurveResult
 from .data import PAPER, ReportData
+from .loops import joint_equivalent_loop, loop_area
 from .stiffness import configuration_joints, k_eq_table, rq_joints
 
 STATUS_NAMES = ("stuck", "stick–slip", "gross slip", "partly open", "open")
@@ -217,27 +218,34 @@ def _closed(x: np.ndarray) -> np.ndarray:
 
 
 def _element_loops(ax, data: ReportData, cr: CurveResult) -> None:
-    """T_x (N) against u_x (µm) over one cycle for the elements of :func:`loop_elements`."""
+    """T_x (N) against u_x (µm) over one cycle for the elements of :func:`loop_elements`; the
+    legend gives each x-loop's area against the element's whole dissipated energy (x and y)."""
     r = np.hypot(data.xy[:, 0], data.xy[:, 1])
     for i in loop_elements(data, cr):
+        area = loop_area(cr.elem_u[i], cr.elem_T[i])
         ax.plot(_closed(cr.elem_u[i]) * 1e3, _closed(cr.elem_T[i]),
-                label=f"element {i} (r = {r[i]:.1f} mm, {STATUS_NAMES[cr.status[i]]})")
+                label=f"element {i} (r = {r[i]:.1f} mm, {STATUS_NAMES[cr.status[i]]}): "
+                      f"∮T_x du_x = {area:.3g}, W = {cr.energy[i]:.3g} N·mm")
     ax.set_xlabel("relative displacement u_x [µm]")
     ax.set_ylabel("tangential force T_x [N]")
     ax.set_title(f"{cr.config}: element loops at resonance, {cr.level:.3g} N", fontsize=9)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=6)
 
 
 def _joint_loops(ax, data: ReportData) -> None:
-    """Σ T_x (N) against the mean u_x (µm) of every configuration at the top level."""
+    """Whole joint at the top level, per configuration: the loop along the joint's slip pattern
+    (:func:`~.loops.joint_equivalent_loop`: amplitude ‖û‖ of the element slips, in-phase
+    stiffness from the energy they store, area = the dissipated energy)."""
     for cfg in data.configs:
         cr = data.curve(cfg, data.top)
         if cr is not None:
-            ax.plot(_closed(cr.loop_u) * 1e3, _closed(cr.loop_T), color=COLORS[cfg], label=cfg)
-    ax.set_xlabel("mean relative displacement u_x [µm]")
-    ax.set_ylabel("Σ T_x [N]")
-    ax.set_title("whole joint", fontsize=9)
-    ax.legend(fontsize=8)
+            x, F, X, k = joint_equivalent_loop(cr.elem_u, cr.elem_T, cr.dissipated)
+            ax.plot(x * 1e3, F, color=COLORS[cfg],
+                    label=f"{cfg}: W = {cr.dissipated:.3g} N·mm, k_J = {k:.3g} N/mm")
+    ax.set_xlabel("joint slip along its pattern, ‖û‖ cos ωt [µm]")
+    ax.set_ylabel("joint force (work conjugate) [N]")
+    ax.set_title("whole joint at the top level: area = dissipated energy per cycle", fontsize=9)
+    ax.legend(fontsize=7)
 
 
 def hysteresis_loops(data: ReportData, path: Path) -> Path | None:
