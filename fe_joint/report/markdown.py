@@ -3,9 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.interface_motion import RIGID_NAMES, decompose, relative_motion
+from ..model.joint import stuck_modes
 from ..study.artifacts import rq_label
 from .data import PAPER, ReportData
 from .loops import loop_area
+from .stiffness import configuration_joints
 
 
 def _fmt(x: float | None, f: str = "{:.4g}") -> str:
@@ -97,6 +100,29 @@ def _joint_state(data: ReportData) -> list[str]:
             shear = float(np.mean(cr.loop_T))
             L.append(f"| {cfg} | {shear:.4g} | {shear / mu_n:.3f} | {1e3 * np.mean(cr.loop_u):.4g} | "
                      f"{loop_area(cr.loop_u, cr.loop_T):.4g} | {cr.dissipated:.4g} |")
+    return L + [""] + _interface_motion(data)
+
+
+def _interface_motion(data: ReportData) -> list[str]:
+    """How the interface moves in each configuration's stuck mode of interest (shares of Σ A|u|²)."""
+    L = ["How the interface moves in the stuck mode of interest (share of the relative motion's "
+         "area-weighted mean square; `mean/rms u_x` near 0: the slips cancel over the interface, "
+         "the joint does not slide as a whole):", "",
+         "| configuration | f [Hz] | " + " | ".join(RIGID_NAMES) + " | deformation x / y / z | mean/rms u_x |",
+         "|---|---|" + "---|" * len(RIGID_NAMES) + "---|---|"]
+    rm = data.rm
+    for name, joint in configuration_joints(data).items():
+        try:
+            lin = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint)
+        except ValueError as e:      # e.g. a model without an elastic mode among its lowest ten
+            L.append(f"| {name} | – | {e} |")
+            continue
+        u = relative_motion(lin.modes[:, lin.mode_index], rm.pair_dofs, rm.pair_frame)
+        im = decompose(u, rm.pair_xyz, rm.pair_area)
+        L.append(f"| {name} | {lin.frequencies[lin.mode_index]:.2f} | "
+                 + " | ".join(f"{v:.3f}" for v in im.rigid)
+                 + " | " + " / ".join(f"{v:.2f}" for v in im.deformation)
+                 + f" | {im.mean_over_rms[0]:.3f} |")
     return L + [""]
 
 
