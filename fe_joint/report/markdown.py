@@ -90,8 +90,11 @@ def _joint_state(data: ReportData) -> list[str]:
     μ × bolt force), the mean relative slip (µm), the Σ T_x loop's area and the dissipated energy."""
     mu_n = data.case.contact.mu * data.case.preload.bolt_force
     L = ["Whole joint at resonance, top level: the cycle-mean shear Σ T_x is a static force the "
-         "joint carries under a zero-mean excitation (balanced by the bolt); the area of Σ T_x "
-         "against the mean u_x is not the dissipated energy (elements move with different phases).", "",
+         "joint carries under a zero-mean excitation: the elements of the outer ring open and "
+         "re-stick displaced every cycle (a ratchet: README, \"Static shear in the joint\"), and the bolt's shank "
+         "carries −Σ T_x by equilibrium; it grows with H (H = 1 gives about half of H = 7). The area "
+         "of Σ T_x against the mean u_x is not the dissipated energy (elements move with different "
+         "phases).", "",
          "| configuration | mean Σ T_x [N] | / μ·F_bolt | mean u_x [µm] | ∮ Σ T_x dū [N·mm] | dissipated W [N·mm] |",
          "|---|---|---|---|---|---|"]
     for cfg in data.configs:
