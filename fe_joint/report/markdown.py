@@ -42,22 +42,23 @@ def _levels(data: ReportData, s: dict) -> list[str]:
     return L
 
 
-def _frf_table(data: ReportData, s: dict) -> list[str]:
+def _frf_table(data: ReportData, s: dict, stuck: dict) -> list[str]:
     """Per configuration: stuck frequency (Hz) and, per level, peak Hz / µm / nonlinear elements / N·mm."""
     n = len(data.levels)
     L = ["", "## Frequency responses", "", "![FRFs](figures/frf_configurations.png)", "",
          "| configuration | f stuck [Hz] | " + " | ".join(
              f"L{i}: peak [Hz] / amp [µm] / elements slipping or opening / E [N·mm]" for i in range(n)) + " |",
          "|---|---|" + "---|" * n]
+    f_stuck = {name: lin.frequencies[lin.mode_index] for name, lin in stuck.items() if lin is not None}
     for cfg in data.configs:
-        row = [cfg, _fmt(s["stuck_frequency_hz"].get(cfg if cfg != "v3" else "v2"), "{:.2f}")]
+        row = [cfg, _fmt(f_stuck.get(cfg), "{:.2f}")]
         for i in range(n):
             cr = data.curve(cfg, i)
             row.append("–" if cr is None else
                        f"{cr.peak_hz:.2f} / {1e3 * cr.peak_amplitude:.3g} / {cr.n_nonlinear} of {cr.n_active} "
                        f"/ {cr.dissipated:.3g}")
         L.append("| " + " | ".join(row) + " |")
-    L += ["", "(v3's stuck frequency column shows v2's, its starting point.)", "",
+    L += ["", "(v3's stuck frequency is that of its converged k_n, k_t.)", "",
           "![FRF vs Rq](figures/frf_roughness.png)", ""]
     return L
 
@@ -82,7 +83,7 @@ def _contact(data: ReportData, s: dict) -> list[str]:
     L += ["", "![k_eq](figures/keq_contact_fraction.png)", "",
           "## Contact state, energy, hysteresis at resonance", "",
           "![status](figures/status_energy.png)", "", "![loops](figures/hysteresis_loops.png)", ""]
-    return L + _joint_state(data)
+    return L
 
 
 def _joint_state(data: ReportData) -> list[str]:
@@ -103,10 +104,22 @@ def _joint_state(data: ReportData) -> list[str]:
             shear = float(np.mean(cr.loop_T))
             L.append(f"| {cfg} | {shear:.4g} | {shear / mu_n:.3f} | {1e3 * np.mean(cr.loop_u):.4g} | "
                      f"{loop_area(cr.loop_u, cr.loop_T):.4g} | {cr.dissipated:.4g} |")
-    return L + [""] + _interface_motion(data)
+    return L + [""]
 
 
-def _interface_motion(data: ReportData) -> list[str]:
+def _stuck_modes(data: ReportData) -> dict:
+    """Each configuration's stuck modes (v3 with its converged stiffnesses), None where the
+    model has no elastic mode among its lowest ten."""
+    rm, out = data.rm, {}
+    for name, joint in configuration_joints(data).items():
+        try:
+            out[name] = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint)
+        except ValueError:
+            out[name] = None
+    return out
+
+
+def _interface_motion(data: ReportData, stuck: dict) -> list[str]:
     """How the interface moves in each configuration's stuck mode of interest (shares of Σ A|u|²)."""
     L = ["How the interface moves in the stuck mode of interest (share of the relative motion's "
          "area-weighted mean square; `mean/rms u_x` near 0: the slips cancel over the interface, "
@@ -114,11 +127,9 @@ def _interface_motion(data: ReportData) -> list[str]:
          "| configuration | f [Hz] | " + " | ".join(RIGID_NAMES) + " | deformation x / y / z | mean/rms u_x |",
          "|---|---|" + "---|" * len(RIGID_NAMES) + "---|---|"]
     rm = data.rm
-    for name, joint in configuration_joints(data).items():
-        try:
-            lin = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint)
-        except ValueError as e:      # e.g. a model without an elastic mode among its lowest ten
-            L.append(f"| {name} | – | {e} |")
+    for name, lin in stuck.items():
+        if lin is None:
+            L.append(f"| {name} | – | no elastic mode among the lowest ten |")
             continue
         u = relative_motion(lin.modes[:, lin.mode_index], rm.pair_dofs, rm.pair_frame)
         im = decompose(u, rm.pair_xyz, rm.pair_area)
@@ -191,6 +202,8 @@ def report_markdown(data: ReportData, summary: dict) -> str:
     Returns:
         Markdown text ending in a newline; figures are linked as ``figures/<name>.png``.
     """
-    L = (_header(data, summary) + _levels(data, summary) + _frf_table(data, summary)
-         + _contact(data, summary) + _v3(summary) + _cost(summary) + _speed(data.speed))
+    stuck = _stuck_modes(data)
+    L = (_header(data, summary) + _levels(data, summary) + _frf_table(data, summary, stuck)
+         + _contact(data, summary) + _joint_state(data) + _interface_motion(data, stuck)
+         + _v3(summary) + _cost(summary) + _speed(data.speed))
     return "\n".join(L) + "\n"
