@@ -28,8 +28,10 @@ along the cubic through the samples j-2..j+1 of (u_t, u_n), and integrates the e
   (|kt (u_t - w)| = L) and slip -> stick (slip rate kt e.u_t' - L' = 0). Opening needs none: the
   force at the next sample is zero whatever happened before.
 
-The sample forces are O(h^4) accurate (h = 2 pi / n_t) where the backward-Euler radial return
-was O(h) in 2D; the harmonics keep the O(h^2) aliasing of the force's kinks.
+2D slip is 4th order in h = 2 pi / n_t (the backward-Euler radial return at each sample used
+before was 1st order); the least accurate steps are those right after a closing into slip, where
+the slip equation is singular (L = 0). The harmonics keep the O(h^2) aliasing of the force's
+kinks (scripts/bench_aft2d.py).
 
 Elements that stay closed and within the cone at every sample from w = 0 (stuck) or open at every
 sample are recognized by a vectorized test and never marched: stuck elements are exactly linear
@@ -64,7 +66,8 @@ SCAN_LIMIT = 16
 SLIP_TOL = 1e-12
 #: a force this close to the limit (relative) at the start of a stick phase is on it (rounding)
 EDGE_TOL = 1e-12
-#: switches located inside one step; more were never seen (a further one would be dropped)
+#: switches located inside one step (3 occur at n_t = 16 with large 2D motion and separation;
+#: a 4th would be ignored: the step would end in the state then reached)
 MAX_SWITCH = 3
 #: switch times are located to this absolute accuracy in tau (Newton, bisection as safeguard)
 ROOT_TOL, ROOT_ITER = 1e-14, 60
@@ -1146,8 +1149,9 @@ class FrictionContacts:
             max_cycles: cycle budget (default ``self.max_cycles``).
 
         Returns:
-            T (k, 2, nt) tangential force N, N (k, nt) normal force N, slip (k, nt) bool,
-            closed (k, nt) bool, cycles marched, and when jacobian: dT (k, 2, nt, 3 nH),
+            T (k, 2, nt) tangential force N, N (k, nt) normal force N, slip (k, nt) bool
+            (slipped during the step ending at the sample), closed (k, nt) bool, cycles marched,
+            and when jacobian: dT (k, 2, nt, 3 nH),
             dN (k, nt, 3 nH) in the element's (direction, harmonic) layout.
         """
         tab = _StepTables(u, self.kt[idx], self.mu[idx], self.kn[idx], self.n0[idx], self.gap[idx])

@@ -18,8 +18,37 @@ Magnus/Möbius slip steps, switches located inside the steps). Prints markdown t
 
 Usage: OMP_NUM_THREADS=1 python scripts/bench_aft2d.py [--old REV] [--repeat 5] [--quick]
 
-Measured here (shared 2-core machine, old vs new in the same run):
-(see README, "Friction dynamics", for the table of record)
+Measured here (shared 2-core machine, old vs new in the same run, --repeat 7; the cost ratios
+drifted between 2.0 and 2.4 (F) and 1.6 and 2.2 (F + J) over four runs with the machine's load):
+
+| case | n_t | old | new | floor (exact samples) |
+|---|---|---|---|---|
+| 1D Jenkins (describing function) | 32 | 2.5e-03 | 2.5e-03 |  |
+| 1D Jenkins (describing function) | 64 | 5.1e-04 | 5.1e-04 |  |
+| 1D Jenkins (describing function) | 128 | 8.1e-05 | 8.1e-05 |  |
+| 1D Jenkins (describing function) | 256 | 1.2e-06 | 1.2e-06 |  |
+| 1D Jenkins (describing function) | 512 | 5.0e-06 | 5.0e-06 |  |
+| 1D with separation | 32 | 1.2e-03 | 8.9e-04 | 8.9e-04 |
+| 1D with separation | 64 | 5.0e-04 | 2.0e-04 | 2.0e-04 |
+| 1D with separation | 128 | 8.3e-05 | 3.8e-05 | 3.8e-05 |
+| 1D with separation | 256 | 1.5e-05 | 9.9e-06 | 9.9e-06 |
+| 1D with separation | 512 | 5.2e-06 | 3.4e-06 | 3.4e-06 |
+| circular orbit (phase, rad) | 32 | 9.5e-02 | 5.2e-05 |  |
+| circular orbit (phase, rad) | 64 | 4.8e-02 | 3.3e-06 |  |
+| circular orbit (phase, rad) | 128 | 2.4e-02 | 2.0e-07 |  |
+| circular orbit (phase, rad) | 256 | 1.2e-02 | 1.3e-08 |  |
+| circular orbit (phase, rad) | 512 | 6.1e-03 | 8.0e-10 |  |
+| ellipses with separation | 32 | 2.0e-02 | 6.4e-04 | 6.4e-04 |
+| ellipses with separation | 64 | 1.0e-02 | 2.3e-04 | 2.3e-04 |
+| ellipses with separation | 128 | 5.2e-03 | 7.6e-05 | 7.6e-05 |
+| ellipses with separation | 256 | 2.6e-03 | 1.7e-05 | 1.7e-05 |
+| ellipses with separation | 512 | 1.3e-03 | 3.2e-06 | 3.2e-06 |
+
+| evaluate (ms) | old F | old F + J | new F | new F + J | new/old F | new/old F + J |
+|---|---|---|---|---|---|---|
+| 300 elements, H = 3, n_t = 128 | 86.65 | 180.08 | 204.52 | 387.13 | 2.36 | 2.15 |
+| 1 element, 1D slip | 0.27 | 0.98 | 1.00 | 3.63 | 3.65 | 3.71 |
+| 1 element, 2D slip | 0.29 | 1.19 | 0.91 | 1.83 | 3.13 | 1.54 |
 """
 from __future__ import annotations
 
