@@ -4,8 +4,10 @@
   solution (updated every step, so steps are relative changes), and the frequency step is capped
   at ``max_domega`` (default range/100) so that flat parts cannot step over a narrow peak.
 * Tangent predictor: null vector of [J, dR/dw] from the bordered system with the previous tangent
-  as last row, oriented so that the sign of the bordered determinant stays constant along the
-  branch (dense path; the GMRES path keeps t . t_prev > 0).
+  as last row, oriented so that the sign of the bordered determinant is that of the previous
+  point. The sign is known on the dense path only: a point solved by GMRES (sign 0) is no
+  reference, and the tangent after it keeps t . t_prev > 0. So a branch whose linear solves
+  switch between the two paths never compares a sign with one the other path did not compute.
 * Corrector: damped Newton on {R(U, w) = 0, t . (Y - Y_pred) = 0}; the bordered system is solved
   directly (reduced on the nonlinear elements), so it stays regular at turning points.
 * Corner folds: with sampled piecewise-linear contact laws a turning point generically sits where
@@ -209,19 +211,22 @@ def _tangent(hb, force: np.ndarray, sc: _Scaling, w: float, ev: _Eval, prev: np.
 
     Solves the bordered system with the previous tangent ``prev`` as last row (so t . prev > 0
     before orientation) and flips t when the bordered determinant's sign differs from
-    ``ref_sign``: robust at the corner folds of the piecewise-linear contact laws, where the
-    tangent can turn by > 90 deg. A sign of 0 (unknown: GMRES path) never flips.
+    ``ref_sign``, the oriented sign at the previous point: robust at the corner folds of the
+    piecewise-linear contact laws, where the tangent can turn by > 90 deg. Only two signs of
+    the dense path are compared: a sign of 0 (unknown: GMRES path), here or in ``ref_sign``,
+    never flips, so t . prev > 0 then.
 
     Returns:
-        (t (U.size + 1,) scaled and of unit norm, sign of the bordered determinant or 0).
+        (t (U.size + 1,) scaled and of unit norm, sign of the bordered determinant with t as
+        last row: ``ref_sign`` after a flip, else the sign found; 0 on the GMRES path).
     """
     Rw = hb.r_omega(w, force, ev.g)
     tU, tw = sc.border(prev)
     [(dU, dw)], sign = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(np.zeros(sc.shape), -1.0)])
     t = sc.Y(dU, dw)
     t /= np.linalg.norm(t)
-    if ref_sign is not None and sign != 0 and sign != ref_sign:
-        t = -t
+    if ref_sign and sign and sign != ref_sign:
+        t, sign = -t, -sign
     return t, sign
 
 
@@ -425,7 +430,8 @@ class _Branch:
         """Make the corrected point current: new tangent, Solution, amplitude, next step."""
         hb, ev = self.hb, corr.ev
         self.U, self.w = corr.U, corr.w
-        self.t, _ = _tangent(hb, self.force, self.sc, self.w, ev, self.t, self.ref_sign)
+        # the reference of the next orientation is this point's sign (0 after a GMRES solve)
+        self.t, self.ref_sign = _tangent(hb, self.force, self.sc, self.w, ev, self.t, self.ref_sign)
         self.sols.append(hb.make_solution(self.w, self.force, self.U, float(np.linalg.norm(ev.R) / ev.scale),
                                           corr.it, ev.nl.size, g=ev.g,
                                           jac=(ev.nl, ev.Dg) if self.keep_jac else None))

@@ -123,3 +123,65 @@ def test_settings_and_keywords_give_identical_branches():
     assert a.turning_points == b.turning_points and a.newton_iterations == b.newton_iterations
     assert np.array_equal(np.stack([s_.contact for s_ in a.solutions]),
                           np.stack([s_.contact for s_ in b.solutions]))
+
+
+# ------------------------------------------------------------- linear-solver switches mid-branch
+class ForcedPath(HarmonicBalance):
+    """HarmonicBalance whose Newton systems take the GMRES path where ``gmres(omega)`` is True and
+    the dense LU elsewhere, whatever their size: a solver switch at chosen frequencies, as when
+    the number of slipping elements crosses ``dense_limit`` on a large model."""
+
+    def __init__(self, s, c, gmres, **kw):
+        super().__init__(s, c, **kw)
+        self.gmres = gmres
+
+    def _reduced(self, omega, nl, Dg):
+        self.dense_limit = -1 if self.gmres(omega) else 10**9
+        return super()._reduced(omega, nl, Dg)
+
+
+def alternating(omega: float) -> bool:
+    """GMRES and dense LU in alternate frequency bands of 0.025 rad/s (GMRES first)."""
+    return int(omega * 40) % 2 == 0
+
+
+def test_solver_switch_keeps_the_direction_of_travel():
+    """Jenkins oscillator slipping from the start, its solves switching between GMRES and the
+    dense LU: the branch goes forward to the band end without revisiting a frequency and stays
+    on the closed form. (The tangent used to be oriented by a determinant sign taken at the
+    start, 0 on the GMRES path, and every dense point after such a start was flipped: the branch
+    retraced itself to w -> 0.)"""
+    m, k, cc, kt, fs, F = 1.0, 1.0, 0.02, 1.0, 0.1, 0.3
+    s = LinearStructure([[m]], [[k]], [[cc]])
+    c = FrictionContacts(np.array([[[0, -1, -1], [-1, -1, -1]]]), kt=kt, kn=1.0, mu=fs, n0=1.0)
+    for gmres in (lambda w: w < 1.0, alternating):
+        hb = ForcedPath(s, c, gmres, harmonics=1, samples=1024)
+        assert hb.solve(0.7, np.array([F])).n_nonlinear == 1        # a GMRES start that slips
+        frf = hb.frf(0.7, 1.8, np.array([F]), dof=0, ds_max=0.3, max_domega=1.1 / 40)
+        assert frf.omega[-1] == 1.8 and np.all(np.diff(frf.omega) > 0) and not frf.turning_points
+        assert hb.stats["gmres_iterations"] > 0 and frf.stable.all()
+        # every 7th point and the peak (the closed form takes 0.5 s a point)
+        pts = np.union1d(np.arange(0, frf.omega.size, 7), [np.argmax(frf.amplitude)])
+        ref = np.array([jenkins_frf_h1(w, m, k, cc, kt, fs, F)[0] for w in frf.omega[pts]])
+        assert np.max(np.abs(frf.amplitude[pts] - ref) / ref) <= 6e-5
+
+
+def test_fold_branch_is_the_same_whichever_solver_takes_each_point():
+    """Softening oscillator whose contact opens from the start (two folds): with the solves
+    switching between GMRES and the dense LU in alternate bands, the branch is the all-dense one
+    (same points, folds and fold-parity stability, amplitudes to solver tolerance). Fold parity
+    is what the study's large models use; it is the flag the spurious folds of a flipped
+    tangent corrupted."""
+    f = np.array([0.2])
+    runs = {}
+    for name, gmres in (("dense", lambda w: False), ("switching", alternating)):
+        s, c = softening_oscillator().s, softening_oscillator().c
+        hb = ForcedPath(s, c, gmres, harmonics=3, samples=64)
+        runs[name] = hb.frf(0.6, 2.6, f, dof=0, ds_max=0.1, stability="fold")
+    a, b = runs["dense"], runs["switching"]
+    assert len(a.turning_points) == 2 and a.omega[a.turning_points[0]] > a.omega[a.turning_points[1]]
+    assert (~a.stable).sum() == 5 and b.omega[-1] == 2.6
+    assert a.turning_points == b.turning_points and np.array_equal(a.stable, b.stable)
+    assert len(a.omega) == len(b.omega)
+    assert np.max(np.abs(a.amplitude - b.amplitude)) <= 1e-8 * a.amplitude.max()
+    assert np.max(np.abs(a.omega - b.omega)) <= 1e-8 * a.omega.max()
