@@ -4,14 +4,22 @@
   solution (updated every step, so steps are relative changes), and the frequency step is capped
   at ``max_domega`` (default range/100) so that flat parts cannot step over a narrow peak.
 * Tangent predictor: null vector of [J, dR/dw] from the bordered system with the previous tangent
-  as last row, oriented so that the sign of the bordered determinant stays constant along the
-  branch (dense path; the GMRES path keeps t . t_prev > 0).
+  as last row, oriented so that the sign of the bordered determinant is that of the previous
+  point. The sign comes with the dense path's LU; a point solved by GMRES has none (0): it is
+  no reference, and the tangent after it keeps t . t_prev > 0. So a branch whose linear solves
+  switch between the two paths never compares a sign with one the other path did not compute.
 * Corrector: damped Newton on {R(U, w) = 0, t . (Y - Y_pred) = 0}; the bordered system is solved
   directly (reduced on the nonlinear elements), so it stays regular at turning points.
 * Corner folds: with sampled piecewise-linear contact laws a turning point generically sits where
   one time sample switches state (a corner of the branch). When no point exists on the hyperplane
   ahead, the tangent of the piece beyond the corner is taken at the predictor, oriented by the
-  determinant sign, and the corrector restarts from the corner along it.
+  determinant sign, and the corrector restarts from the corner along it. There the tangent can
+  turn by more than 90 deg, and t . t_prev > 0 would send the branch back the way it came. So on
+  the GMRES path the signs at a corner (current point, predictor, the point accepted beyond it)
+  come from a dense LU of the bordered system (``linsolve_aug(exact_sign=True)``), and so do
+  both signs of a step whose GMRES tangent turned sharply (t . t_prev < ``SHARP_TURN``): a corner
+  fold can also be passed within one step. A few LUs per corner met; smooth GMRES stretches
+  need none.
 * Step length grows x1.5 after <= 3 corrector iterations, shrinks x0.7 after >= 7, halves on failure;
   ``ConvergenceError`` below ds_min. Turning points (sign changes of the w-component of the tangent)
   are listed in ``FRFResult.turning_points``.
@@ -37,6 +45,11 @@ from . import stability as stab
 
 #: accepted values of ``ContinuationSettings.stability``
 STABILITY_METHODS = ("auto", "hill", "fold", "none")
+
+#: t . t_prev below which a tangent found by GMRES (no determinant sign) is oriented again with
+#: exact signs: the turn may be a corner fold. The tangent flips met at points reached without a
+#: corner restart in small friction problems had |t . t_prev| of 0.75-0.85 (cos 25.8 deg = 0.9).
+SHARP_TURN = 0.9
 
 
 @dataclass
@@ -204,24 +217,29 @@ def _evaluate(hb, force: np.ndarray, U: np.ndarray, w: float) -> _Eval:
 
 
 def _tangent(hb, force: np.ndarray, sc: _Scaling, w: float, ev: _Eval, prev: np.ndarray,
-             ref_sign: int | None) -> tuple[np.ndarray, int]:
+             ref_sign: int | None, exact_sign: bool = False) -> tuple[np.ndarray, int]:
     """Predictor: unit tangent of the branch at the point evaluated in ``ev`` (frequency w, rad/s).
 
     Solves the bordered system with the previous tangent ``prev`` as last row (so t . prev > 0
     before orientation) and flips t when the bordered determinant's sign differs from
-    ``ref_sign``: robust at the corner folds of the piecewise-linear contact laws, where the
-    tangent can turn by > 90 deg. A sign of 0 (unknown: GMRES path) never flips.
+    ``ref_sign``, the oriented sign at the previous point: robust at the corner folds of the
+    piecewise-linear contact laws, where the tangent can turn by > 90 deg. Only two signs of
+    the dense path are compared: a sign of 0 (unknown: GMRES path), here or in ``ref_sign``,
+    never flips, so t . prev > 0 then. ``exact_sign``: get the sign by a dense LU on the GMRES
+    path too (corner folds).
 
     Returns:
-        (t (U.size + 1,) scaled and of unit norm, sign of the bordered determinant or 0).
+        (t (U.size + 1,) scaled and of unit norm, sign of the bordered determinant with t as
+        last row: ``ref_sign`` after a flip, else the sign found; 0 on the GMRES path).
     """
     Rw = hb.r_omega(w, force, ev.g)
     tU, tw = sc.border(prev)
-    [(dU, dw)], sign = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(np.zeros(sc.shape), -1.0)])
+    [(dU, dw)], sign = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(np.zeros(sc.shape), -1.0)],
+                                       exact_sign=exact_sign)
     t = sc.Y(dU, dw)
     t /= np.linalg.norm(t)
-    if ref_sign is not None and sign != 0 and sign != ref_sign:
-        t = -t
+    if ref_sign and sign and sign != ref_sign:
+        t, sign = -t, -sign
     return t, sign
 
 
@@ -360,15 +378,18 @@ class _Branch:
         than the range, or ``stop(amplitudes so far)`` returns True."""
         while len(self.sols) < self.settings.max_points:
             self.t = self.sc.rescale(self.U, self.t)
-            self._accept(self._next_point())
+            self._accept(*self._next_point())
             if self._past_end():
                 break
             self.amps.append(self.amp_prev)
             if stop is not None and stop(self.amps):
                 break
 
-    def _next_point(self) -> _Correction:
+    def _next_point(self) -> tuple[_Correction, bool]:
         """Predict along t and correct, halving ds until a point is accepted.
+
+        Returns:
+            (the accepted correction, True if it lies beyond a corner fold (corner restart)).
 
         Raises:
             ConvergenceError when ds falls below ds_min.
@@ -382,12 +403,12 @@ class _Branch:
             self.total_it += corr.it
             if corr.ok:
                 if self._amplitude_step_ok(corr):
-                    return corr
+                    return corr, False
                 self.ds *= 0.5
                 continue
             corr, ok = self._corner_restart(Y, Yp, corr)
             if ok:
-                return corr
+                return corr, True
             self.ds *= 0.5
             if self.ds < s.ds_min:
                 raise ConvergenceError(f"continuation step fell below ds_min near omega = {self.w:.6g} rad/s",
@@ -408,24 +429,47 @@ class _Branch:
         The branch turns back exactly where a time sample switches state, so no point exists on
         the hyperplane ahead. Take the tangent of the piece beyond the corner (Jacobian at the
         predictor Yp), orient it by the bordered-determinant sign, and restart the corrector from
-        the corner (the failed corrector's last iterate) along it.
+        the corner (the failed corrector's last iterate) along it. Both signs are exact (dense LU
+        on the GMRES path): the current point's, when it was solved by GMRES, is computed first
+        (the Jacobian there, its own tangent as last row) and becomes ``ref_sign``.
 
         Returns:
             (the restart's _Correction, accepted?: converged and moved by > 1e-3 ds from Y).
         """
+        self._exact_reference()
         Up, wp = self.sc.unscale(Yp)
         evp = _evaluate(self.hb, self.force, Up, wp)
-        tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign)
+        tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign, exact_sign=True)
         Yc = self.sc.Y(failed.U, failed.w)
         corr = _correct(self.hb, self.force, self.sc, Yc + self.ds * tb, tb, self.settings.max_corrector)
         self.total_it += corr.it
         return corr, bool(corr.ok and np.linalg.norm(self.sc.Y(corr.U, corr.w) - Y) > 1e-3 * self.ds)
 
-    def _accept(self, corr: _Correction) -> None:
-        """Make the corrected point current: new tangent, Solution, amplitude, next step."""
+    def _exact_reference(self) -> None:
+        """Make ``ref_sign`` known at the current point when it was solved by GMRES (0): the sign
+        of the bordered determinant with its own tangent as last row, by a dense LU (one more
+        evaluation of the Jacobian there)."""
+        if not self.ref_sign:
+            ev = _evaluate(self.hb, self.force, self.U, self.w)
+            _, self.ref_sign = _tangent(self.hb, self.force, self.sc, self.w, ev, self.t, None,
+                                        exact_sign=True)
+
+    def _accept(self, corr: _Correction, beyond_corner: bool = False) -> None:
+        """Make the corrected point current: new tangent, Solution, amplitude, next step.
+
+        The new tangent is oriented by the exact determinant signs of both points (dense LU on
+        the GMRES path) where the branch may have passed a corner fold: after a corner restart
+        (``beyond_corner``) and where the GMRES tangent turned by more than acos(SHARP_TURN)."""
         hb, ev = self.hb, corr.ev
-        self.U, self.w = corr.U, corr.w
-        self.t, _ = _tangent(hb, self.force, self.sc, self.w, ev, self.t, self.ref_sign)
+        exact = beyond_corner
+        if not exact:
+            t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, self.t, self.ref_sign)
+            exact = sign == 0 and t @ self.t < SHARP_TURN
+        if exact:
+            self._exact_reference()           # at the previous point, so before moving on
+            t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, self.t, self.ref_sign, exact_sign=True)
+        # the reference of the next orientation is this point's sign (0 after a GMRES solve)
+        self.U, self.w, self.t, self.ref_sign = corr.U, corr.w, t, sign
         self.sols.append(hb.make_solution(self.w, self.force, self.U, float(np.linalg.norm(ev.R) / ev.scale),
                                           corr.it, ev.nl.size, g=ev.g,
                                           jac=(ev.nl, ev.Dg) if self.keep_jac else None))

@@ -169,7 +169,7 @@ class HarmonicBalance:
         self.ne, self.nc = c.ne, 3 * c.ne
         self._pre = None          # cached preconditioner (GMRES path)
         self.krylov_tol = float(krylov_tol)
-        self.stats = {"residuals": 0, "linear_solves": 0, "gmres_iterations": 0}
+        self.stats = {"residuals": 0, "linear_solves": 0, "gmres_iterations": 0, "sign_factorizations": 0}
 
     # ------------------------------------------------------------------ layouts
     def to_contact(self, U: np.ndarray) -> np.ndarray:
@@ -281,14 +281,16 @@ class HarmonicBalance:
             G[b:b + p, b:b + p] = Gh.real
         return G
 
-    def _reduced(self, omega: float, nl: np.ndarray, Dg: np.ndarray):
-        """Reduced Newton operator on the nonlinear elements: (cn, idx, matvec, J or None, prec)."""
+    def _reduced(self, omega: float, nl: np.ndarray, Dg: np.ndarray, dense: bool = False):
+        """Reduced Newton operator on the nonlinear elements: (cn, idx, matvec, J or None, prec).
+
+        J is formed (dense path) up to ``dense_limit``, or at any size when ``dense`` is True."""
         k, nH = nl.size, self.nH
         cn = (3 * nl[:, None] + np.arange(3)).ravel()
         p = cn.size
         P = nH * p
         idx = self._elidx(k)
-        if P <= self.dense_limit:
+        if dense or P <= self.dense_limit:
             Gb = self._gbig(omega, cn)
             J = np.eye(P)
             J[:, idx] += (Gb[:, idx].transpose(1, 0, 2) @ Dg).transpose(1, 0, 2)
@@ -336,12 +338,17 @@ class HarmonicBalance:
             X = self._krylov(matvec, prec, B, B.shape[0])
         return [r - self._expand(omega, nl, cn, idx, Dg, X[:, i]) for i, r in enumerate(rhs)]
 
-    def linsolve_aug(self, omega, nl, Dg, Rw, tU, tw, rhs):
+    def linsolve_aug(self, omega, nl, Dg, Rw, tU, tw, rhs, exact_sign: bool = False):
         """Bordered Newton solves of pseudo-arc-length continuation (nonsingular at folds).
 
         Solves [[J, Rw], [tU^T, tw]] [dU; dw] = [-R; -c] for each (R, c) in ``rhs`` (tU, tw
         already scaled), reduced on the nonlinear elements: with dU_R = -R_R - Rw_R dw - J_RN dU_N
         the last row becomes (tU_N - J_RN^T tU_R) . dU_N + (tw - tU_R . Rw_R) dw = -c + tU_R . R_R.
+
+        Args:
+            exact_sign: factorize the bordered system by LU even above ``dense_limit``, so that
+                the sign of its determinant is known (the continuation asks for it at corner
+                folds only; counted in ``stats["sign_factorizations"]``).
 
         Returns:
             list of (dU (n_H, n_c), dw), and the sign of the bordered determinant (0 if unknown,
@@ -355,7 +362,9 @@ class HarmonicBalance:
                 dw = (-c + np.sum(tU * R)) / den
                 out.append((-R - Rw * dw, dw))
             return out, int(np.sign(den))
-        cn, idx, matvec, J, prec = self._reduced(omega, nl, Dg)
+        cn, idx, matvec, J, prec = self._reduced(omega, nl, Dg, dense=exact_sign)
+        if exact_sign and prec is None and self.nH * cn.size > self.dense_limit:
+            self.stats["sign_factorizations"] += 1
         tR = tU.copy()
         tR[:, cn] = 0.0
         y = self.gapply(omega, tR, transpose=True)[:, cn].ravel()

@@ -1,5 +1,6 @@
 """Continuation: fold passing with Hill stability; FRF vs the closed form along a whole curve;
-settings validation and the settings=/keywords equivalence."""
+settings validation and the settings=/keywords equivalence; the tangent orientation when the
+linear solves switch between LU and GMRES, and at corner folds on the GMRES path."""
 import dataclasses
 
 import numpy as np
@@ -123,3 +124,114 @@ def test_settings_and_keywords_give_identical_branches():
     assert a.turning_points == b.turning_points and a.newton_iterations == b.newton_iterations
     assert np.array_equal(np.stack([s_.contact for s_ in a.solutions]),
                           np.stack([s_.contact for s_ in b.solutions]))
+
+
+# ------------------------------------------------------------- linear-solver switches mid-branch
+class ForcedPath(HarmonicBalance):
+    """HarmonicBalance whose Newton systems take the GMRES path where ``gmres(omega)`` is True and
+    the dense LU elsewhere, whatever their size: a solver switch at chosen frequencies, as when
+    the number of slipping elements crosses ``dense_limit`` on a large model."""
+
+    def __init__(self, s, c, gmres, **kw):
+        super().__init__(s, c, **kw)
+        self.gmres = gmres
+
+    def _reduced(self, omega, nl, Dg, dense=False):
+        self.dense_limit = -1 if self.gmres(omega) else 10**9
+        return super()._reduced(omega, nl, Dg, dense)
+
+
+def alternating(omega: float) -> bool:
+    """GMRES and dense LU in alternate frequency bands of 0.025 rad/s (GMRES first)."""
+    return int(omega * 40) % 2 == 0
+
+
+def test_solver_switch_keeps_the_direction_of_travel():
+    """Jenkins oscillator slipping from the start, its solves switching between GMRES and the
+    dense LU: the branch goes forward to the band end without revisiting a frequency and stays
+    on the closed form. (The tangent used to be oriented by a determinant sign taken at the
+    start, 0 on the GMRES path, and every dense point after such a start was flipped: the branch
+    retraced itself to w -> 0.)"""
+    m, k, cc, kt, fs, F = 1.0, 1.0, 0.02, 1.0, 0.1, 0.3
+    s = LinearStructure([[m]], [[k]], [[cc]])
+    c = FrictionContacts(np.array([[[0, -1, -1], [-1, -1, -1]]]), kt=kt, kn=1.0, mu=fs, n0=1.0)
+    for gmres in (lambda w: w < 1.0, alternating):
+        hb = ForcedPath(s, c, gmres, harmonics=1, samples=1024)
+        assert hb.solve(0.7, np.array([F])).n_nonlinear == 1        # a GMRES start that slips
+        frf = hb.frf(0.7, 1.8, np.array([F]), dof=0, ds_max=0.3, max_domega=1.1 / 40)
+        assert frf.omega[-1] == 1.8 and np.all(np.diff(frf.omega) > 0) and not frf.turning_points
+        assert hb.stats["gmres_iterations"] > 0 and frf.stable.all()
+        # every 7th point and the peak (the closed form takes 0.5 s a point)
+        pts = np.union1d(np.arange(0, frf.omega.size, 7), [np.argmax(frf.amplitude)])
+        ref = np.array([jenkins_frf_h1(w, m, k, cc, kt, fs, F)[0] for w in frf.omega[pts]])
+        assert np.max(np.abs(frf.amplitude[pts] - ref) / ref) <= 6e-5
+
+
+def test_fold_branch_is_the_same_whichever_solver_takes_each_point():
+    """Softening oscillator whose contact opens from the start (two folds): with the solves
+    switching between GMRES and the dense LU in alternate bands, the branch is the all-dense one
+    (same points, folds and fold-parity stability, amplitudes to solver tolerance). Fold parity
+    is what the study's large models use; it is the flag the spurious folds of a flipped
+    tangent corrupted."""
+    f = np.array([0.2])
+    runs = {}
+    for name, gmres in (("dense", lambda w: False), ("switching", alternating)):
+        s, c = softening_oscillator().s, softening_oscillator().c
+        hb = ForcedPath(s, c, gmres, harmonics=3, samples=64)
+        runs[name] = hb.frf(0.6, 2.6, f, dof=0, ds_max=0.1, stability="fold")
+    a, b = runs["dense"], runs["switching"]
+    assert len(a.turning_points) == 2 and a.omega[a.turning_points[0]] > a.omega[a.turning_points[1]]
+    assert (~a.stable).sum() == 5 and b.omega[-1] == 2.6
+    assert a.turning_points == b.turning_points and np.array_equal(a.stable, b.stable)
+    assert len(a.omega) == len(b.omega)
+    assert np.max(np.abs(a.amplitude - b.amplitude)) <= 1e-8 * a.amplitude.max()
+    assert np.max(np.abs(a.omega - b.omega)) <= 1e-8 * a.omega.max()
+
+
+def test_oriented_determinant_sign_is_a_branch_invariant(monkeypatch):
+    """The oriented bordered-determinant sign is the same at every point and corner restart of a
+    branch, through folds. Without a solver switch (dense path) the previous point's sign, now
+    the reference of each orientation, is therefore the start's, the reference before: such
+    branches are bitwise those of the former rule. On the GMRES path the sign is unknown (0)
+    except where it was computed exactly (corners, sharp turns), and then it is the dense one."""
+    import hbm.continuation as cont
+    signs = []
+    tangent = cont._tangent
+
+    def recording(*args, **kwargs):
+        t, sign = tangent(*args, **kwargs)
+        signs.append(sign)
+        return t, sign
+    monkeypatch.setattr(cont, "_tangent", recording)
+    s, c = softening_oscillator().s, softening_oscillator().c
+    known = {}
+    for name, gmres in (("dense", lambda w: False), ("gmres", lambda w: True)):
+        signs.clear()
+        frf = ForcedPath(s, c, gmres, harmonics=3, samples=64).frf(0.6, 2.6, np.array([0.2]), dof=0,
+                                                                    ds_max=0.1, stability="none")
+        assert len(frf.turning_points) == 2 and len(signs) >= len(frf.omega)
+        known[name] = set(signs[1:]) - {0}      # signs[0]: the start's, before its orientation
+        assert len(known[name]) == 1
+    assert 0 in signs and known["dense"] == known["gmres"]
+
+
+def test_gmres_path_passes_corner_folds_like_the_dense_path():
+    """Mass on an inclined preloaded friction contact (tangential and normal gap both follow x),
+    n_t = 32: the branch turns by more than 90 deg at corners of the sampled law (8 tangent
+    flips, no fold in frequency). Every solve on the GMRES path, which has no determinant sign,
+    must give the dense path's branch: the corner signs are then taken from a dense LU. (With
+    t . t_prev > 0 alone the branch went back the way it came and the step fell below ds_min.)"""
+    s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
+    c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
+    runs = {}
+    for name, gmres in (("dense", lambda w: False), ("gmres", lambda w: True)):
+        hb = ForcedPath(s, c, gmres, harmonics=1, samples=32)
+        runs[name] = hb.frf(0.4, 2.5, np.array([0.4]), dof=0, stability="none")
+        runs[name + " LUs"] = hb.stats["sign_factorizations"]
+    a, b = runs["dense"], runs["gmres"]
+    assert runs["dense LUs"] == 0 and runs["gmres LUs"] >= 8
+    for r in (a, b):
+        assert r.omega[-1] == 2.5 and np.all(np.diff(r.omega) > 0) and not r.turning_points
+    # same points; at the corners near the peak the amplitude is sensitive (1e-6 apart there)
+    assert len(a.omega) == len(b.omega) and np.max(np.abs(a.omega - b.omega)) <= 1e-6
+    assert np.max(np.abs(a.amplitude - b.amplitude) / a.amplitude) <= 1e-5
