@@ -3,12 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.interface_motion import RIGID_NAMES, decompose, relative_motion
-from ..model.joint import stuck_modes
+from ..model.interface_motion import RIGID_NAMES
 from ..study.artifacts import rq_label
 from .data import PAPER, ReportData
-from .loops import loop_area
-from .stiffness import configuration_joints
 
 
 def _fmt(x: float | None, f: str = "{:.4g}") -> str:
@@ -42,16 +39,15 @@ def _levels(data: ReportData, s: dict) -> list[str]:
     return L
 
 
-def _frf_table(data: ReportData, s: dict, stuck: dict) -> list[str]:
+def _frf_table(data: ReportData, s: dict) -> list[str]:
     """Per configuration: stuck frequency (Hz) and, per level, peak Hz / µm / nonlinear elements / N·mm."""
     n = len(data.levels)
     L = ["", "## Frequency responses", "", "![FRFs](figures/frf_configurations.png)", "",
          "| configuration | f stuck [Hz] | " + " | ".join(
              f"L{i}: peak [Hz] / amp [µm] / elements slipping or opening / E [N·mm]" for i in range(n)) + " |",
          "|---|---|" + "---|" * n]
-    f_stuck = {name: lin.frequencies[lin.mode_index] for name, lin in stuck.items() if lin is not None}
     for cfg in data.configs:
-        row = [cfg, _fmt(f_stuck.get(cfg), "{:.2f}")]
+        row = [cfg, _fmt(s["stuck_frequency_hz"].get(cfg), "{:.2f}")]
         for i in range(n):
             cr = data.curve(cfg, i)
             row.append("–" if cr is None else
@@ -86,57 +82,34 @@ def _contact(data: ReportData, s: dict) -> list[str]:
     return L
 
 
-def _joint_state(data: ReportData) -> list[str]:
+def _joint_state(s: dict) -> list[str]:
     """Per configuration at the top level: the cycle-mean joint shear (N, and as a share of
     μ × bolt force), the mean relative slip (µm), the Σ T_x loop's area and the dissipated energy."""
-    mu_n = data.case.contact.mu * data.case.preload.bolt_force
     L = ["Whole joint at resonance, top level: the cycle-mean shear Σ T_x is a static force the "
          "joint carries under a zero-mean excitation: the elements of the outer ring open and "
-         "re-stick displaced every cycle (a ratchet: README, \"Static shear in the joint\"), and the bolt's shank "
-         "carries −Σ T_x by equilibrium; it grows with H (H = 1 gives about half of H = 7). The area "
-         "of Σ T_x against the mean u_x is not the dissipated energy (elements move with different "
-         "phases).", "",
+         "re-stick displaced every cycle (a ratchet: README, \"Static shear in the joint\"), and "
+         "the bolt's shank carries −Σ T_x by equilibrium; it grows with H (H = 1 gives about half "
+         "of H = 7). The area of Σ T_x against the mean u_x is not the dissipated energy (elements "
+         "move with different phases).", "",
          "| configuration | mean Σ T_x [N] | / μ·F_bolt | mean u_x [µm] | ∮ Σ T_x dū [N·mm] | dissipated W [N·mm] |",
          "|---|---|---|---|---|---|"]
-    for cfg in data.configs:
-        cr = data.curve(cfg, data.top)
-        if cr is not None:
-            shear = float(np.mean(cr.loop_T))
-            L.append(f"| {cfg} | {shear:.4g} | {shear / mu_n:.3f} | {1e3 * np.mean(cr.loop_u):.4g} | "
-                     f"{loop_area(cr.loop_u, cr.loop_T):.4g} | {cr.dissipated:.4g} |")
+    for cfg, v in s["joint_shear_top_level"].items():
+        L.append(f"| {cfg} | {v['mean_shear_N']:.4g} | {v['share_of_mu_bolt_force']:.3f} | "
+                 f"{1e3 * v['mean_slip_mm']:.4g} | {v['mean_slip_loop_area']:.4g} | {v['dissipated']:.4g} |")
     return L + [""]
 
 
-def _stuck_modes(data: ReportData) -> dict:
-    """Each configuration's stuck modes (v3 with its converged stiffnesses), None where the
-    model has no elastic mode among its lowest ten."""
-    rm, out = data.rm, {}
-    for name, joint in configuration_joints(data).items():
-        try:
-            out[name] = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint)
-        except ValueError:
-            out[name] = None
-    return out
-
-
-def _interface_motion(data: ReportData, stuck: dict) -> list[str]:
+def _interface_motion(s: dict) -> list[str]:
     """How the interface moves in each configuration's stuck mode of interest (shares of Σ A|u|²)."""
     L = ["How the interface moves in the stuck mode of interest (share of the relative motion's "
          "area-weighted mean square; `mean/rms u_x` near 0: the slips cancel over the interface, "
          "the joint does not slide as a whole):", "",
          "| configuration | f [Hz] | " + " | ".join(RIGID_NAMES) + " | deformation x / y / z | mean/rms u_x |",
          "|---|---|" + "---|" * len(RIGID_NAMES) + "---|---|"]
-    rm = data.rm
-    for name, lin in stuck.items():
-        if lin is None:
-            L.append(f"| {name} | – | no elastic mode among the lowest ten |")
-            continue
-        u = relative_motion(lin.modes[:, lin.mode_index], rm.pair_dofs, rm.pair_frame)
-        im = decompose(u, rm.pair_xyz, rm.pair_area)
-        L.append(f"| {name} | {lin.frequencies[lin.mode_index]:.2f} | "
-                 + " | ".join(f"{v:.3f}" for v in im.rigid)
-                 + " | " + " / ".join(f"{v:.2f}" for v in im.deformation)
-                 + f" | {im.mean_over_rms[0]:.3f} |")
+    for name, m in s["interface_motion"].items():
+        L.append(f"| {name} | {m['frequency_hz']:.2f} | " + " | ".join(f"{m[n]:.3f}" for n in RIGID_NAMES)
+                 + " | " + " / ".join(f"{m[f'deform {c}']:.2f}" for c in "xyz")
+                 + f" | {m['mean_over_rms_ux']:.3f} |")
     return L + [""]
 
 
@@ -202,8 +175,7 @@ def report_markdown(data: ReportData, summary: dict) -> str:
     Returns:
         Markdown text ending in a newline; figures are linked as ``figures/<name>.png``.
     """
-    stuck = _stuck_modes(data)
-    L = (_header(data, summary) + _levels(data, summary) + _frf_table(data, summary, stuck)
-         + _contact(data, summary) + _joint_state(data) + _interface_motion(data, stuck)
+    L = (_header(data, summary) + _levels(data, summary) + _frf_table(data, summary)
+         + _contact(data, summary) + _joint_state(summary) + _interface_motion(summary)
          + _v3(summary) + _cost(summary) + _speed(data.speed))
     return "\n".join(L) + "\n"

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .joint_state import interface_motions, joint_shear, stuck_modes_by_configuration
 from ..study.artifacts import rq_label, v3_job_name
 from ..study.frf import CurveResult
 from .data import ReportData
@@ -54,12 +55,15 @@ def build_summary(data: ReportData) -> dict:
     """
     fe, ct, dyn = data.summaries["fe"], data.summaries["contact"], data.dynamics
     kn_smooth = data.extra["kn_smooth"]
+    stuck = stuck_modes_by_configuration(data)
+    motions = interface_motions(data, stuck)
     summary = {
         "case": data.case.name,
         "mesh": {k: data.summaries["mesh"].get(k) for k in MESH_KEYS},
         "first_elastic_hz_full_free": (fe.get("full_elastic_hz") or [None])[0],
         "reduced_vs_full_max_rel_error": fe.get("max_rel_freq_error"),
-        "stuck_frequency_hz": dyn["f_lin"],
+        "stuck_frequency_hz": {**dyn["f_lin"], **({"v3": motions["v3"]["frequency_hz"]}
+                                                  if "v3" in motions else {})},
         "levels_N": data.levels, "macroslip_estimate_N": data.macroslip,
         "levels_over_macroslip": [lv / data.macroslip for lv in data.levels],
         "contact_fraction": {rq_label(rq): data.surfaces[rq].contact_fraction for rq in data.rqs},
@@ -68,6 +72,8 @@ def build_summary(data: ReportData) -> dict:
         "k_eq_vs_rq": {rq_label(q): v for q, v in k_eq_table(rq_joints(data)).items()},
         "peaks": {k.name: curve_peak(cr) for k, cr in data.curves.items()},
         "v3": v3_section(data),
+        "joint_shear_top_level": joint_shear(data),
+        "interface_motion": motions,
         "coupling_rel_error": ct.get("coupling_rel_error"),
         "linear_peak_rel_error": dyn.get("linear_peak_rel_error"),
         "timings_s": timings(data),
