@@ -25,15 +25,18 @@ along the cubic through the samples j-2..j+1 of (u_t, u_n), and integrates the e
   (a parallel to e) is reproduced exactly;
 * switches inside the step are located on the path by safeguarded Newton: closing (N = 0; the
   slider resets there, or slip starts at once along u_t' when kt |u_t'| > L'), stick -> slip
-  (|kt (u_t - w)| = L) and slip -> stick (slip rate kt e.u_t' - L' = 0). Opening needs none: the
-  force at the next sample is zero whatever happened before.
+  (|kt (u_t - w)| = L; also when the stuck force leaves the limit only between the samples,
+  found from the largest excess on the step, _stick_peak: the end sample alone would miss it
+  and make the force jump where that sample crosses the limit) and slip -> stick (slip rate
+  kt e.u_t' - L' = 0). Opening needs none: the force at the next sample is zero whatever
+  happened before.
 
 2D slip is 4th order in h = 2 pi / n_t (the backward-Euler radial return at each sample used
 before was 1st order); the least accurate steps are those right after a closing into slip, where
 the slip equation is singular (L = 0). The harmonics keep the O(h^2) aliasing of the force's
 kinks (scripts/bench_aft2d.py).
 
-Elements that stay closed and within the cone at every sample from w = 0 (stuck) or open at every
+Elements that stay closed and within the cone all along the path from w = 0 (stuck) or open at every
 sample are recognized by a vectorized test and never marched: stuck elements are exactly linear
 (T = kt u_t), open ones carry the constant -n0. The analytic Jacobian of the force harmonics is
 the exact derivative of the computed map: each step's derivative (hand-coded for the common
@@ -66,6 +69,11 @@ SCAN_LIMIT = 16
 SLIP_TOL = 1e-12
 #: a force this close to the limit (relative) at the start of a stick phase is on it (rounding)
 EDGE_TOL = 1e-12
+#: a stuck force that exceeds the limit between two samples by more than this (relative to the
+#: limit) slips there, even when it is back inside at the step end (see _stick_peak)
+PEAK_TOL = 1e-9
+#: grid of the search for the largest excess of a stick phase (then refined by Newton)
+PEAK_GRID = 16
 #: switches located inside one step (3 occur at n_t = 16 with large 2D motion and separation;
 #: a 4th would be ignored: the step would end in the state then reached)
 MAX_SWITCH = 3
@@ -528,13 +536,17 @@ def _sw_close(S: _Switching, ix, s: int) -> None:
 
 def _sw_slide(S: _Switching, ix, s: int) -> None:
     """Stick: ends the step stuck, or starts slipping where |kt (u_t - w)| reaches L."""
-    over = np.abs(S.kt[ix] * (S.u1[ix] - S.w[ix])) > S.L1[ix]
+    end = np.abs(S.kt[ix] * (S.u1[ix] - S.w[ix])) > S.L1[ix]
+    peak, tpk = _stick_peak(S.ct[ix], S.Lc[ix], S.kt[ix], S.w[ix], S.t[ix])
+    over = end | peak
     S.run[ix[~over]] = False
-    ix = ix[over]
+    ix, tpk, peak = ix[over], tpk[over], peak[over]
     if not ix.size:
         return
     ct, Lc, kt = S.rows(ix)
     w, t0 = S.w[ix], S.t[ix]
+    # the first excursion: up to the largest excess inside the step if there is one, else the end
+    thi = np.where(peak, tpk, 1.0)
     f0 = _excess(ct, Lc, kt, w, t0)
     # already outside at the phase start? (a phase that starts on the limit, after a closing or
     # a stop, has f0 = 0 up to rounding)
@@ -543,8 +555,8 @@ def _sw_slide(S: _Switching, ix, s: int) -> None:
     r = np.nonzero(~at)[0]
     if r.size:
         cr, lr, kr = tuple(c[r] for c in ct), tuple(c[r] for c in Lc), kt[r]
-        ts[r] = _root_vector(_excess_fun(cr, lr, kr, w[r]), t0[r], np.ones(r.size),
-                             np.minimum(f0[r], 0.0), _excess(cr, lr, kr, w[r], 1.0))
+        ts[r] = _root_vector(_excess_fun(cr, lr, kr, w[r]), t0[r], thi[r],
+                             np.minimum(f0[r], 0.0), np.maximum(_excess(cr, lr, kr, w[r], thi[r]), 0.0))
     d = _poly(ct, ts) - w
     ad = np.abs(d)
     z = d / ad
@@ -641,13 +653,15 @@ def _event_scalar(ct, Nc, Lc, kt, w, mode, tlo, u1, L1):
             else:
                 mode, w, code = M_STICK, _poly(ct, t), SW_OPEN_STICK
         elif mode == M_STICK:
-            if abs(kt * (u1 - w)) <= L1:
+            peak, tpk = _stick_over_scalar(ct, Lc, kt, w, t)
+            thi = tpk if peak else 1.0
+            if abs(kt * (u1 - w)) <= L1 and not peak:
                 return w, slipped, codes, taus, p, q
             f0 = _excess(ct, Lc, kt, w, t)
             code = SW_STICK_SLIP_AT if f0 > EDGE_TOL * L1 else SW_STICK_SLIP
             if code == SW_STICK_SLIP:
-                t = _root_scalar(_excess_fun(ct, Lc, kt, w), t, 1.0, min(f0, 0.0),
-                                 _excess(ct, Lc, kt, w, 1.0))
+                t = _root_scalar(_excess_fun(ct, Lc, kt, w), t, thi, min(f0, 0.0),
+                                 max(_excess(ct, Lc, kt, w, thi), 0.0))
             d = _poly(ct, t) - w
             ad = abs(d)
             mode, z, slipped = M_SLIP, d / ad, True
@@ -674,6 +688,99 @@ def _event_scalar(ct, Nc, Lc, kt, w, mode, tlo, u1, L1):
         w, f = u1 - (L1 / kt) * z1, -(L1 / kt) * K1
         p, q = f * p, f * q
     return w, slipped, codes, taus, p, q
+
+
+# ---------------------------------------------------------------------------- excursions of a stick phase
+#: (i, j, k) = [i + j == k]: power coefficients of a product of two cubics
+_CONV = np.array([[[float(i + j == k) for k in range(7)] for j in range(4)] for i in range(4)])
+#: Bernstein coefficients on [0, 1] of a degree-6 polynomial from its power coefficients
+_BERN = np.array([[math.comb(k, i) / math.comb(6, i) if i <= k else 0.0 for i in range(7)]
+                  for k in range(7)])
+_BERN_L = _BERN.tolist()
+
+
+def _excess_sq(ct, Lc, kt, w):
+    """Power coefficients (..., 7) of kt^2 |u_t - w|^2 - L^2 along the step (ct (..., 4) complex,
+    Lc (..., 4)): > 0 exactly where the stuck force is outside the limit (L >= 0)."""
+    d = np.array(ct, dtype=complex)
+    d[..., 0] -= w
+    M = (kt ** 2)[..., None, None] * (d[..., :, None] * d[..., None, :].conj()).real
+    M -= Lc[..., :, None] * Lc[..., None, :]
+    return np.einsum("...ij,ijk->...k", M, _CONV)
+
+
+def _horner(a, t):
+    """sum_k a[:, k] t^k (a (b, n) with t (b,), or a (b, n, 1) with t (b, m))."""
+    v = a[:, -1]
+    for k in range(a.shape[1] - 2, -1, -1):
+        v = v * t + a[:, k]
+    return v
+
+
+def _stick_clear(ct, Lc, kt, w):
+    """True where the stuck force certainly stays inside the limit over the whole step (all
+    Bernstein coefficients of _excess_sq <= 0; conservative)."""
+    return (_excess_sq(ct, Lc, kt, w) @ _BERN.T).max(axis=-1) <= 0.0
+
+
+def _stick_peak(ct, Lc, kt, w, t0):
+    """Largest excess of a stick phase from t0 to the step end (arrays over steps, ct (b, 4)).
+
+    The samples only bound a step: the stuck force can leave the limit between them and be back
+    inside at the end. Testing the end sample alone then misses that slip, and the missed slip
+    makes the force jump where the end sample crosses the limit (or, in a periodic state whose
+    end sample lies on the limit, flip by rounding between two periodic states). The largest
+    excess is located on a grid, refined by Newton on the polynomial _excess_sq.
+
+    Returns:
+        over (b,) the excess exceeds PEAK_TOL max(L, L(1)) somewhere in (t0, 1], tpk (b,) where it is
+        largest (the bracket end of the stick -> slip root).
+    """
+    a = _excess_sq(ct, Lc, kt, w)                                     # (b, 7)
+    s = np.linspace(0.0, 1.0, PEAK_GRID + 1)
+    tg = t0[:, None] + (1.0 - t0)[:, None] * s                          # (b, m)
+    G = _horner(a[:, :, None], tg)
+    m = np.argmax(G, axis=1)
+    r = np.arange(m.size)
+    t = tg[r, m]
+    lo, hi = tg[r, np.maximum(m - 1, 0)], tg[r, np.minimum(m + 1, PEAK_GRID)]
+    a1 = a[:, 1:] * np.arange(1, 7)
+    a2 = a1[:, 1:] * np.arange(1, 6)
+    for _ in range(8):
+        g2 = _horner(a2, t)
+        step = np.divide(_horner(a1, t), g2, out=np.zeros_like(t), where=g2 < 0.0)
+        tn = np.clip(t - step, lo, hi)
+        if np.all(np.abs(tn - t) <= ROOT_TOL):
+            t = tn
+            break
+        t = tn
+    t = np.where(_horner(a, t) > G[r, m], t, tg[r, m])
+    c, l = tuple(np.moveaxis(np.asarray(ct), -1, 0)), tuple(np.moveaxis(np.asarray(Lc), -1, 0))
+    L = _poly(l, t)
+    # (relative to the larger of the limit there and at the step end: right after a closing the
+    # limit vanishes, and rounding-level excesses near it are no excursion)
+    over = kt * np.abs(_poly(c, t) - w) - L > PEAK_TOL * np.maximum(np.maximum(L, _poly(l, 1.0)), 1e-300)
+    return over, t
+
+
+def _stick_over_scalar(ct, Lc, kt, w, t0=0.0):
+    """_stick_peak for one step on Python scalars: (over, tpk); (False, 1.0) when certainly clear."""
+    if t0 == 0.0:
+        d = (ct[0] - w, ct[1], ct[2], ct[3])
+        # |kt (u_t - w)| <= kt sum |d_i| and L >= L_0 - sum |L_i| (i > 0) on [0, 1]: deep inside
+        if kt * (abs(d[0]) + abs(d[1]) + abs(d[2]) + abs(d[3])) <= (
+                Lc[0] - abs(Lc[1]) - abs(Lc[2]) - abs(Lc[3])):
+            return False, 1.0
+        k2 = kt * kt
+        a = [0.0] * 7
+        for i in range(4):
+            for j in range(4):
+                a[i + j] += k2 * (d[i] * d[j].conjugate()).real - Lc[i] * Lc[j]
+        if max(sum(_BERN_L[k][i] * a[i] for i in range(k + 1)) for k in range(7)) <= 0.0:
+            return False, 1.0
+    over, t = _stick_peak(np.array([ct]), np.array([Lc]), np.array([kt]), np.array([w]),
+                          np.array([float(t0)]))
+    return bool(over[0]), float(t[0])
 
 
 # ---------------------------------------------------------------------------- one period
@@ -768,6 +875,15 @@ def _advance(tab: _StepTables, rows, rec: _Record, w, pos, act):
     slip0 = closed0 & (r0 >= tab.L[g, p0] * (1.0 - SLIP_TOL))
     stick0 = closed0 & ~slip0
     cont = np.where(stick0[:, None], ok & c1 & (np.abs(kt[:, None] * (u1 - wa[:, None])) <= L1), ~c1)
+    # stick steps that end inside the limit may still leave it between the samples
+    cs = np.nonzero(stick0[:, None] & cont)
+    if cs[0].size:
+        Jc = np.minimum(J[cs], nt - 1)
+        ctc, Lcc, ktc, wc = tab.ct[g[cs[0]], Jc], tab.Lc[g[cs[0]], Jc], kt[cs[0]], wa[cs[0]]
+        q = np.nonzero(~_stick_clear(ctc, Lcc, ktc, wc))[0]
+        if q.size:
+            over, _ = _stick_peak(ctc[q], Lcc[q], ktc[q], wc[q], np.zeros(q.size))
+            cont[cs[0][q[over]], cs[1][q[over]]] = False
     w_after = np.where(stick0[:, None] & c1, wa[:, None], u1)
     s = np.nonzero(slip0)[0]
     if s.size:
@@ -845,7 +961,7 @@ def _steps_scalar(tl: SimpleNamespace, w: complex, rec: _Record) -> complex:
                     code[j], slip[j], w = SLIP_STEP, True, ut[j] - (L[j] / kt) * z1
                     continue
                 mode = M_SLIP
-            elif abs(kt * (ut[j] - w)) <= L[j]:
+            elif abs(kt * (ut[j] - w)) <= L[j] and not _stick_over_scalar(tl.ct[j], tl.Lc[j], kt, w)[0]:
                 continue
             else:
                 mode = M_STICK
@@ -1129,6 +1245,26 @@ class FrictionContacts:
         closed_all = np.all(N > 0.0, axis=1)
         T2 = self.kt[idx, None] ** 2 * (u[:, 0] ** 2 + u[:, 1] ** 2)
         stuck_all = closed_all & np.all(T2 <= (self.mu[idx, None] * N) ** 2, axis=1)
+        c = np.nonzero(stuck_all)[0]
+        if c.size:
+            # as the march would find from w = 0: no excursion outside the limit, and no opening,
+            # between the samples either (else the linear shortcut would jump where a sample
+            # crosses the limit)
+            nt = u.shape[2]
+            st = (np.arange(nt)[:, None] + _STENCIL) % nt
+            ut = u[c, 0] + 1j * u[c, 1]
+            ct = ut[:, st] @ _VINV.T
+            Nc = N[c][:, st] @ _VINV.T
+            ng = np.stack([_poly(tuple(np.moveaxis(Nc, -1, 0)), g) for g in _GAUSS], axis=-1)
+            Lc = self.mu[idx[c], None, None] * Nc
+            kt = np.broadcast_to(self.kt[idx[c], None], ut.shape)
+            ok = (ng > 0.0).all(axis=(1, 2)) | (self.mu[idx[c]] == 0.0)
+            clear = _stick_clear(ct, Lc, kt, np.zeros(ut.shape))
+            e, j = np.nonzero(~clear)
+            if e.size:
+                over, _ = _stick_peak(ct[e, j], Lc[e, j], kt[e, j], np.zeros(e.size), np.zeros(e.size))
+                ok[e[over]] = False
+            stuck_all[c[~ok]] = False
         return open_all, stuck_all
 
     # ------------------------------------------------------------------ time march

@@ -226,3 +226,51 @@ def test_stuck_and_open_shortcuts_unchanged():
     assert list(nl) == [1, 2]                                         # 0 is the linear base
     assert not DF[0].any()
     assert np.array_equal(DF[1], np.diag(np.repeat([KT, KT, KN], 2 * H + 1)))
+
+
+# Element 99 of the e2e resonator case (v3, Rq 15, n_t = 32) at the Newton iterate where the FRF
+# continuation stalled near 1536.95 rad/s, and that iterate's Newton direction. Its periodic
+# state has the stuck force exactly on the limit at one sample, after the cubic path left the
+# limit inside the step before it: the end-sample test alone let rounding pick either the state
+# that slips inside that step or the one that does not, so F jumped (by 0.086 N) back and forth
+# along the direction.
+STALL_ELEMENT = dict(kt=27302.006671066847, kn=33152.436672009746, mu=0.6, n0=95.27006438243785)
+STALL_U = np.array([[-5.6795957393506531e-04, -1.9019241851477744e-03, 4.5793342784910694e-04],
+                    [9.2581491956211459e-05, 2.9817145219622801e-04, -7.1976584832443463e-05],
+                    [1.0522316567508238e-04, -2.7802200002213190e-03, 6.6923819297798012e-04]])
+STALL_DIR = np.array([[8.9745531489040038e-08, -8.0846755955991908e-09, 4.7767059433918825e-09],
+                      [-2.9169214194435798e-08, 1.2838422369442476e-09, -7.2472364809188487e-10],
+                      [-9.0769697459361761e-09, -1.1818757655238000e-08, 6.9872449986662990e-09]])
+
+
+def test_excursion_between_samples_is_continuous():
+    """A stuck force that leaves the limit between two samples slips there even when the end
+    sample is (back) inside: F is continuous along the stalled Newton direction and the
+    analytic Jacobian matches finite differences there."""
+    f = Fourier(1, 32)
+    c = FrictionContacts(np.array([[[0, 1, 2], [-1, -1, -1]]]), **STALL_ELEMENT)
+    s = np.linspace(0.0, 1.0, 201)
+    F = np.array([c.evaluate((STALL_U + x * STALL_DIR)[None], f, jacobian=False)[0][0] for x in s])
+    d = np.linalg.norm(np.diff(F, axis=0).reshape(s.size - 1, -1), axis=1)
+    assert d.max() <= 1.5 * np.median(d)                  # was ~1e4 x the median (jumps)
+    for x in (0.0, 0.37, 0.81):
+        U = (STALL_U + x * STALL_DIR)[None]
+        _, nl, DF = c.evaluate(U, f)
+        h = 1e-3
+        fd = (c.evaluate(U + h * STALL_DIR, f, jacobian=False)[0]
+              - c.evaluate(U - h * STALL_DIR, f, jacobian=False)[0]) / (2 * h)
+        an = DF[0] @ STALL_DIR.ravel()
+        assert np.allclose(an, fd[0].ravel(), rtol=1e-3, atol=1e-3 * np.abs(fd).max())
+
+
+def test_stick_step_slips_on_excursion_inside_step():
+    """_stick_peak finds an excursion outside the limit between samples that the end samples
+    miss, at its largest excess; a limit above the path is certified clear."""
+    # samples 0.3, 0.9, 0.9, 0.3 at tau = -1..2: u_t = 0.9 + 0.3 tau (1 - tau), 0.975 at the middle
+    ct = friction._VINV @ np.array([0.3, 0.9, 0.9, 0.3], dtype=complex)
+    Lc = np.array([0.95, 0.0, 0.0, 0.0])                  # kt = 1: inside at both samples
+    over, t = friction._stick_peak(ct[None], Lc[None], np.array([1.0]), np.array([0j]), np.array([0.0]))
+    assert over[0] and abs(t[0] - 0.5) < 1e-9
+    assert not friction._stick_clear(ct, Lc, np.array(1.0), np.array(0j))
+    over, _ = friction._stick_peak(ct[None], Lc[None] / 0.95, np.array([1.0]), np.array([0j]), np.array([0.0]))
+    assert not over[0]
