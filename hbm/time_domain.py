@@ -577,6 +577,7 @@ class FrictionTimeIntegrator:
             keep = col >= 0
             Bd[rows[keep], col[keep]] += sign
         self.B = Bd
+        self.M = M
         self.modes = stuck_modal_damping(M, K, Bd.T @ (self.k0[:, None] * Bd), C=C,
                                          damping_ratio=damping_ratio)
         Psi = Bd @ self.modes.phi
@@ -714,7 +715,8 @@ class FrictionTimeIntegrator:
     # ------------------------------------------------------------------ march
     def run(self, omega: float, force, dof: int, steps_per_period: int = 256, rtol: float = 1e-7,
             max_periods: int = 2000, min_periods: int = 3, harmonics: int = 3,
-            callback: Callable[[int, float, float], None] | None = None) -> TimeDomainResult:
+            callback: Callable[[int, float, float], None] | None = None,
+            initial: tuple | None = None) -> TimeDomainResult:
         """March from the preloaded rest state to the periodic steady state.
 
         Args:
@@ -729,6 +731,10 @@ class FrictionTimeIntegrator:
             min_periods: periods marched at least.
             harmonics: Fourier coefficients kept in ``TimeDomainResult.harmonics``.
             callback: called after each period with (period, change, first-harmonic amplitude).
+            initial: optional start state at t = 0 instead of the preloaded rest state:
+                (q0 (n,) mm, v0 (n,) mm/s, w0 (ne, 2) sliders mm), e.g. from an HBM solution, to
+                see whether a periodic state is kept (quasi-static modes start on their static
+                response).
 
         Returns:
             TimeDomainResult (its last period is marched once more after convergence, recording
@@ -776,13 +782,21 @@ class FrictionTimeIntegrator:
         G = (Psi * A1[0]) @ Psi.T + self.R        # u1 = u_pred - G g1
         G = 0.5 * (G + G.T)
         lam_safe = np.where(lam > 0, lam, 1.0)
-        # rest: q = 0, q' = 0 (the quasi-static modes start on their static response)
+        # rest: q = 0, q' = 0, sliders 0 (the quasi-static modes start on their static response)
         y = -Hc.real
         yd = omega * Hc.imag
         u0 = np.zeros(nc)
         w = np.zeros((ne, 2))
-        closed0 = self.n0 - self.kn * self.gap > 0.0
-        ps0 = self._law(np.zeros((ne, 3)), np.zeros((ne, 3)), w)
+        if initial is not None:
+            q0, v0, w0 = (np.asarray(x, float) for x in initial)
+            if q0.shape != (self.n,) or v0.shape != (self.n,) or w0.shape != (ne, 2):
+                raise ValueError(f"initial must be (q0 ({self.n},), v0 ({self.n},), w0 ({ne}, 2))")
+            y = y + (md.phi.T @ (self.M @ q0))[dyn]
+            yd = yd + (md.phi.T @ (self.M @ v0))[dyn]
+            u0 = self.B @ q0
+            w = w0.copy()
+        closed0 = self.n0 + self.kn * (u0.reshape(ne, 3)[:, 2] - self.gap) > 0.0
+        ps0 = self._law(u0.reshape(ne, 3), u0.reshape(ne, 3), w)
         g0 = self._forces(ps0).ravel() - self.k0 * u0
         pi0 = Psi.T @ g0
         g_hist = [g0, g0, g0]

@@ -58,7 +58,8 @@ def test_path_step_exact_along_straight_paths():
             nT = np.hypot(Ts[:, 0], Ts[:, 1])
             slip = nT > p["mu"] * N
             T = np.where(slip[:, None], Ts * (p["mu"] * N / np.maximum(nT, 1e-300))[:, None], Ts)
-            w = np.where((N > 0)[:, None], np.where(slip[:, None], u[:, :2] - T / p["kt"][:, None], w), u[:, :2])
+            w_slip = np.where(slip[:, None], u[:, :2] - T / p["kt"][:, None], w)
+            w = np.where((N > 0)[:, None], w_slip, u[:, :2])
         T = np.where((N > 0)[:, None], T, 0.0)
         err[m] = np.abs(T - one.T).max()
     assert err[4000] <= 2e-4 and 7 <= err[400] / err[4000] <= 13
@@ -139,6 +140,10 @@ def test_stuck_limit_is_the_exact_linear_frf():
         assert abs(r.amplitude - abs(ref[0])) <= 1e-9 * abs(ref[0])
         assert np.all(r.status == 0) and abs(r.friction_work) <= 1e-9 * r.input_work
         assert abs(r.input_work - r.viscous_work) <= 1e-8 * r.input_work
+        # started on the periodic state it stays there: periodic from the first period on
+        r0 = td.run(w, F, 0, steps_per_period=16, rtol=1e-11, min_periods=2,
+                    initial=(ref.real, (1j * w * ref).real, np.zeros((1, 2))))
+        assert r0.periods <= 3 and abs(r0.amplitudes[0] - abs(ref[0])) <= 1e-9 * abs(ref[0])
 
 
 def six_dof_case():
