@@ -216,9 +216,13 @@ class StickSlipIntegrator:
         """Fourier coefficients [a0, a1, b1, ...] of q_dof over the steady period (time origin t0)."""
         t0 = ss["t0"]
         tt = t0 + self.T * np.arange(samples) / samples
+        # each sample from the segment that contains it (a sample a rounding error before the
+        # first segment's start belongs to it: every sample is set)
+        starts = np.array([a for a, _, _ in ss["segments"]])
+        which = np.clip(np.searchsorted(starts, tt, side="right") - 1, 0, len(starts) - 1)
         x = np.empty(samples)
-        for (a, b, traj) in ss["segments"]:
-            msk = (tt >= a) & (tt <= b)
+        for i, (_, _, traj) in enumerate(ss["segments"]):
+            msk = which == i
             if msk.any():
                 x[msk] = traj(tt[msk])[dof]
         th = 2 * np.pi * np.arange(samples) / samples
