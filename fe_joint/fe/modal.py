@@ -77,13 +77,37 @@ def solve_eigenproblem(K: PETSc.Mat, M: PETSc.Mat, nev: int, sigma: float = 0.0,
     """
     if nev < 1:
         raise ValueError(f"nev must be >= 1, got {nev}")
+    vecs = shift_invert(K, M, sigma, nev, tol, max_it, SLEPc.EPS.Which.TARGET_REAL,
+                        lambda vals: np.argsort(vals)[:nev],
+                        f"(tol {tol}, {max_it} restarts)")
+    return rayleigh_ritz(K, M, vecs)
+
+
+def shift_invert(K: PETSc.Mat, M: PETSc.Mat, sigma: float, nev: int, tol: float, max_it: int,
+                 which, select, where: str) -> list:
+    """Shift-and-invert Krylov–Schur of K phi = lambda M phi about ``sigma`` with a MUMPS
+    factorization of K - sigma M; the converged vectors that ``select`` picks.
+
+    Args:
+        K, M: assembled symmetric PETSc matrices (same layout).
+        sigma: shift, (rad/s)².
+        nev: eigenpairs wanted.
+        tol, max_it: SLEPc tolerance and restarts.
+        which: SLEPc's ordering of the converged pairs (e.g. ``EPS.Which.TARGET_REAL``).
+        select: converged eigenvalues (nconv,) → indices of the pairs to return, in order.
+        where: what the ConvergenceError message adds after the counts.
+    Returns:
+        the selected eigenvectors (PETSc Vecs, not yet M-orthonormalized).
+    Raises:
+        ConvergenceError: fewer than ``nev`` pairs converged.
+    """
     _mark_symmetric(K, M)
     eps = SLEPc.EPS().create(K.getComm())
     eps.setOperators(K, M)
     eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
     eps.setDimensions(nev, PETSc.DECIDE)
     eps.setTarget(sigma)
-    eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_REAL)
+    eps.setWhichEigenpairs(which)
     eps.setTolerances(tol, max_it)
     st = eps.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
@@ -92,16 +116,16 @@ def solve_eigenproblem(K: PETSc.Mat, M: PETSc.Mat, nev: int, sigma: float = 0.0,
     eps.solve()
     nconv = eps.getConverged()
     if nconv < nev:
-        raise ConvergenceError(f"SLEPc converged {nconv} of {nev} eigenpairs (tol {tol}, {max_it} restarts)")
+        eps.destroy()
+        raise ConvergenceError(f"SLEPc converged {nconv} of {nev} eigenpairs {where}")
     vals = np.array([eps.getEigenvalue(i).real for i in range(nconv)])
-    order = np.argsort(vals)[:nev]
     vecs = []
-    for i in order:
+    for i in select(vals):
         v = K.createVecRight()
         eps.getEigenvector(int(i), v)
         vecs.append(v)
     eps.destroy()
-    return rayleigh_ritz(K, M, vecs)
+    return vecs
 
 
 def rayleigh_ritz(K: PETSc.Mat, M: PETSc.Mat, vecs: list) -> tuple[np.ndarray, list]:

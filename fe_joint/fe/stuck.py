@@ -18,8 +18,7 @@ from __future__ import annotations
 import numpy as np
 from petsc4py import PETSc
 
-from ..errors import ConvergenceError
-from .modal import ModalResult, mumps_cholesky, rayleigh_ritz, to_hz, vec_values_at
+from .modal import ModalResult, rayleigh_ritz, shift_invert, to_hz, vec_values_at
 
 
 def _pair_blocks(frames: np.ndarray, kn: np.ndarray, kt: np.ndarray) -> np.ndarray:
@@ -135,32 +134,13 @@ def eigenpairs_near(K: PETSc.Mat, M: PETSc.Mat, target_hz: float, nev: int = 4,
     if nev < 1:
         raise ValueError(f"nev must be >= 1, got {nev}")
     sigma = (2 * np.pi * target_hz) ** 2
-    for A in (K, M):
-        A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-    eps = SLEPc.EPS().create(K.getComm())
-    eps.setOperators(K, M)
-    eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
-    eps.setDimensions(nev, PETSc.DECIDE)
-    eps.setTarget(sigma)
-    eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_MAGNITUDE)
-    eps.setTolerances(tol, max_it)
-    st = eps.getST()
-    st.setType(SLEPc.ST.Type.SINVERT)
-    st.setShift(sigma)
-    mumps_cholesky(st.getKSP())
-    eps.solve()
-    nconv = eps.getConverged()
-    if nconv < nev:
-        eps.destroy()
-        raise ConvergenceError(f"SLEPc converged {nconv} of {nev} eigenpairs near {target_hz:g} Hz")
-    vals = np.array([eps.getEigenvalue(i).real for i in range(nconv)])
-    near = np.argsort(np.abs(vals - sigma), kind="stable")[:nev]
-    vecs = []
-    for i in near[np.argsort(vals[near])]:
-        v = K.createVecRight()
-        eps.getEigenvector(int(i), v)
-        vecs.append(v)
-    eps.destroy()
+
+    def nearest(vals: np.ndarray) -> np.ndarray:     # the nev nearest sigma, ascending
+        near = np.argsort(np.abs(vals - sigma), kind="stable")[:nev]
+        return near[np.argsort(vals[near])]
+
+    vecs = shift_invert(K, M, sigma, nev, tol, max_it, SLEPc.EPS.Which.TARGET_MAGNITUDE, nearest,
+                        f"near {target_hz:g} Hz")
     return rayleigh_ritz(K, M, vecs)
 
 
