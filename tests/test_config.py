@@ -1,4 +1,5 @@
-"""Case files and the CLI's handling of bad input (issue 2)."""
+"""Case files, presets and the CLI's handling of bad input (issues 2 and 14; the full table of bad
+inputs is tests/test_bad_inputs.py)."""
 from __future__ import annotations
 
 import subprocess
@@ -80,6 +81,7 @@ def test_default_case_round_trips(tmp_path: Path) -> None:
 
 def test_presets_overlay_and_change_hash() -> None:
     base, quick = load_case(), load_case(preset="quick")
+    assert load_case(preset="default") == base
     assert quick.roughness.grid < base.roughness.grid
     assert quick.material == base.material            # untouched sections stay equal
     assert quick.section_hash("roughness") != base.section_hash("roughness")
@@ -96,3 +98,50 @@ def test_cli_subprocess_one_line_no_traceback(tmp_path: Path) -> None:
     assert "roughness.rq_um" in r.stderr
     r = subprocess.run([str(exe), "run", "--stages", "nope"], capture_output=True, text=True)
     assert r.returncode == 2 and "--stages" in r.stderr
+
+
+# --- precedence: defaults < preset < case file (issue 14) ---
+
+PREC = "[roughness]\ngrid = 128\n[geometry]\nlap_mesh_size = 3.0\n[dynamics]\nharmonics = 3\n"
+
+
+def test_a_key_written_in_the_file_wins_over_the_preset(tmp_path: Path) -> None:
+    f = tmp_path / "prec.toml"
+    f.write_text(PREC)
+    case = load_case(f, preset="quick")
+    # written in the file: kept although quick sets 64, 4.0 and 1
+    assert (case.roughness.grid, case.geometry.lap_mesh_size, case.dynamics.harmonics) == (128, 3.0, 3)
+    # not written: the preset's
+    assert (case.roughness.patch, case.geometry.body_mesh_size, case.dynamics.samples) == (8, 14.0, 32)
+    # neither: the default case's
+    assert case.material == load_case().material and case.roughness.seed == 0
+    # no preset: the file over the defaults
+    plain = load_case(f)
+    assert (plain.roughness.grid, plain.roughness.patch, plain.geometry.body_mesh_size) == (128, 16, 6.0)
+
+
+def test_check_prints_every_value_with_its_source(tmp_path: Path, capsys) -> None:
+    from fe_joint.case import SECTIONS
+    import dataclasses
+    f = tmp_path / "prec.toml"
+    f.write_text(PREC)
+    assert main(["check", str(f), "--preset", "quick"]) == 0
+    out = capsys.readouterr().out
+    # still TOML, and it reads back as the same case
+    again = tmp_path / "again.toml"
+    again.write_text(out)
+    assert load_case(again) == load_case(f, preset="quick")
+    src, section = {}, None
+    for line in out.splitlines():
+        if line.startswith("["):
+            section = line.strip("[]")
+        elif "=" in line:
+            key = line.split("=")[0].strip()
+            src[f"{section}.{key}" if section else key] = line.rsplit("# ", 1)[1]
+    assert len(src) == 1 + sum(len(dataclasses.fields(c)) for c in SECTIONS.values())
+    assert {k for k, v in src.items() if v == "file"} == {
+        "roughness.grid", "geometry.lap_mesh_size", "dynamics.harmonics"}
+    assert {k for k, v in src.items() if v == "preset quick"} == {
+        "geometry.body_mesh_size", "reduction.n_check_modes", "roughness.patch", "roughness.rq_um",
+        "dynamics.samples", "dynamics.max_points", "dynamics.speed_study", "contact.kt_max_passes"}
+    assert set(src.values()) == {"file", "preset quick", "default"}

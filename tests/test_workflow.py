@@ -98,17 +98,14 @@ def test_any_rq_the_case_accepts_runs(run: Path, tmp_path: Path) -> None:
     for d in ("mesh", "fe"):
         shutil.copytree(run / d, out / d)
         shutil.copy(run / "stages" / f"{d}.json", out / "stages" / f"{d}.json")
-    # the quick preset's keys written out (a preset's keys replace the file's, and quick sets
-    # rq_um): the same mesh and FE keys as the e2e run, so both stages are reused
+    # the quick preset under the file's own keys (a key the file writes wins over the preset, so
+    # rq_um is the file's): the same mesh and FE keys as the e2e run, so both stages are reused
     case = tmp_path / "odd.toml"
     case.write_text('name = "odd"\n'
-                    '[geometry]\nlap_mesh_size = 4.0\nbody_mesh_size = 14.0\n'
-                    '[reduction]\nn_check_modes = 4\n'
-                    '[roughness]\ngrid = 64\npatch = 8\nrq_um = [1.2345678]\nv_rq_um = 1.2345678\n'
+                    '[roughness]\nrq_um = [1.2345678]\nv_rq_um = 1.2345678\n'
                     '[dynamics]\nconfigurations = ["baseline", "v3"]\nlevels = [2.0]\n'
-                    'harmonics = 1\nsamples = 32\nmax_points = 600\nspeed_study = false\n'
                     '[contact]\nkt_max_passes = 1\n')
-    assert main(["run", str(case), "--out", str(out), "--no-progress"]) == 0
+    assert main(["run", str(case), "--preset", "quick", "--out", str(out), "--no-progress"]) == 0
     log = [(e["stage"], e["action"]) for e in read_stage_log(out)]
     assert ("fe", "cached") in log
     s = _summary(out)

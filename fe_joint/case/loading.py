@@ -1,9 +1,10 @@
-"""Reading a case: TOML → presets → typed sections (:mod:`.schema`) → cross-checks.
+"""Reading a case: defaults ← preset ← case file → typed sections (:mod:`.schema`) → rules.
 
 Every key is optional: missing keys take the defaults of the embedded default case
-(``fe_joint/cases/resonator.toml``). Unknown keys and wrong types raise :class:`CaseError` here;
-ranges are checked by the section dataclasses themselves; cross-section rules by
-:func:`_validate_cross`. One line names the key (``section.key``) and the allowed range.
+(``fe_joint/cases/resonator.toml``); a preset sets the keys the case file does not write (a key
+written in the file wins). Unknown keys and wrong types raise :class:`CaseError` here; ranges
+are checked by the section dataclasses themselves, the geometry's and the rules between keys by
+:mod:`.checks`. One line names the key (``section.key``) and the allowed range.
 """
 from __future__ import annotations
 
@@ -11,12 +12,15 @@ import copy
 import dataclasses
 import json
 import math
+import re
 import tomllib
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from ..errors import CaseError
+from . import checks
+from .checks import Sources
 from .schema import SECTIONS, Case
 
 
@@ -38,10 +42,6 @@ PRESETS: dict[str, dict] = {
     },
 }
 
-
-
-def _type_name(t: Any) -> str:
-    return getattr(t, "__name__", str(t))
 
 
 def _check_value(key: str, value: Any, f: dataclasses.Field) -> Any:
@@ -70,7 +70,7 @@ def _check_value(key: str, value: Any, f: dataclasses.Field) -> Any:
     return value   # ranges: checked by the section dataclass (schema._Section)
 
 
-def _build_section(name: str, cls: type, table: Any) -> Any:
+def _build_section(name: str, cls: type, table: Any, sources: Sources) -> Any:
     if not isinstance(table, dict):
         raise CaseError(f"[{name}] must be a table")
     fields = {f.name: f for f in dataclasses.fields(cls)}
@@ -82,7 +82,7 @@ def _build_section(name: str, cls: type, table: Any) -> Any:
         f = fields[k]
         if f.metadata:
             kwargs[k] = _check_value(f"{name}.{k}", v, f)
-        else:  # geometry fields: type from the default value, ranges from ResonatorParams.validate
+        else:  # geometry fields: type from the default value, ranges from checks.GEOMETRY_RANGES
             default = f.default
             if isinstance(default, bool) or not isinstance(default, (int, float)):
                 kwargs[k] = v
@@ -94,36 +94,20 @@ def _build_section(name: str, cls: type, table: Any) -> Any:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                     raise CaseError(f"{name}.{k} = {v!r}: must be a finite number")
                 kwargs[k] = float(v)
+    if name == "geometry":
+        checks.check_geometry_ranges(kwargs)
     obj = cls(**kwargs)
-    if hasattr(obj, "validate"):
+    if name == "geometry":
+        checks.check_geometry(obj, sources)
+    if hasattr(obj, "validate"):   # the geometry's own rules: a backstop behind check_geometry
         try:
             obj.validate()
         except ValueError as e:
             msg = str(e)
             raise CaseError(msg if msg.startswith(f"{name}.") else f"{name}.{msg}") from None
+    if name == "geometry":
+        checks.check_mesh_size(obj)
     return obj
-
-
-def _validate_cross(case: Case) -> None:
-    r, d = case.roughness, case.dynamics
-    if r.patch > r.grid:
-        raise CaseError(f"roughness.patch = {r.patch}: must be ≤ roughness.grid ({r.grid})")
-    if len(d.band) != 2 or not d.band[0] < d.band[1]:
-        raise CaseError(f"dynamics.band = {d.band!r}: must be [low, high] with low < high "
-                        "(fractions of the stuck linear frequency)")
-    if d.samples < 2 * (2 * d.harmonics + 1):
-        raise CaseError(f"dynamics.samples = {d.samples}: must be ≥ 2(2H+1) = "
-                        f"{2 * (2 * d.harmonics + 1)} for harmonics = {d.harmonics} (aliasing)")
-    lv = d.levels
-    if isinstance(lv, str):
-        if lv != "auto":
-            raise CaseError(f"dynamics.levels = {lv!r}: must be \"auto\" or a list of forces in N > 0")
-    elif isinstance(lv, list) and lv:
-        for v in lv:
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
-                raise CaseError(f"dynamics.levels: {v!r} must be a force in N, > 0")
-    else:
-        raise CaseError(f"dynamics.levels = {lv!r}: must be \"auto\" or a non-empty list of forces in N > 0")
 
 
 def _merge(base: dict, over: dict) -> dict:
@@ -136,24 +120,77 @@ def _merge(base: dict, over: dict) -> dict:
     return out
 
 
-def case_from_dict(data: dict, preset: str | None = None) -> Case:
-    """Validate a parsed TOML dict (+ optional preset overlay) into a :class:`Case`."""
+def _keys(data: dict) -> list[str]:
+    """The keys a layer writes: "name" and "section.key"."""
+    out = []
+    for k, v in data.items():
+        if isinstance(v, dict):
+            out += [f"{k}.{kk}" for kk in v]
+        else:
+            out.append(k)
+    return out
+
+
+#: a case name is a plain file name: it names the default output folder results/<name>
+_NAME = re.compile(r"[A-Za-z0-9._-]{1,100}")
+
+
+def _check_name(name: Any) -> str:
+    if not isinstance(name, str) or not _NAME.fullmatch(name) or name in (".", ".."):
+        shown = repr(name) if not isinstance(name, str) or len(name) <= 40 else repr(name[:40]) + "…"
+        raise CaseError(f"name = {shown}: must be a plain file name of 1 to 100 letters, digits, "
+                        "'.', '_' or '-' (not '.' or '..')")
+    return name
+
+
+def _default_data() -> dict:
+    return tomllib.loads(default_case_text())
+
+
+def resolve_case(data: dict, preset: str | None = None) -> tuple[Case, Sources]:
+    """Validate a parsed case file over the defaults and a preset; say where each value came from.
+
+    Precedence, lowest first: the embedded default case, the preset, the case file (a key the
+    file writes wins over the preset).
+
+    Args:
+        data: the parsed case file (``{}``: nothing written).
+        preset: a name in :data:`PRESETS`, or None.
+    Returns:
+        (the case, {"name" or "section.key": "default" | "preset <name>" | "file"}).
+    Raises:
+        CaseError: unknown section or key, wrong type, out-of-range value, broken rule.
+    """
     if not isinstance(data, dict):
         raise CaseError("case must be a TOML table")
     for k in data:
         if k != "name" and k not in SECTIONS:
             raise CaseError(f"{k}: unknown section (allowed: name, {', '.join(SECTIONS)})")
+    layers = [("default", _default_data())]
     if preset is not None:
         if preset not in PRESETS:
             raise CaseError(f"--preset {preset!r}: must be one of {', '.join(PRESETS)}")
-        data = _merge(data, PRESETS[preset])
-    name = data.get("name", "resonator")
-    if not isinstance(name, str) or not name or any(c in name for c in "/\\ \t"):
-        raise CaseError(f"name = {name!r}: must be a non-empty string without spaces or slashes")
-    sections = {s: _build_section(s, cls, data.get(s, {})) for s, cls in SECTIONS.items()}
+        layers.append((f"preset {preset}", PRESETS[preset]))
+    layers.append(("file", data))
+    merged: dict = {}
+    sources: Sources = {}
+    for label, layer in layers:
+        merged = _merge(merged, layer)
+        sources.update({k: label for k in _keys(layer)})
+    name = _check_name(merged.get("name", "resonator"))
+    sections = {s: _build_section(s, cls, merged.get(s, {}), sources) for s, cls in SECTIONS.items()}
     case = Case(name=name, **sections)
-    _validate_cross(case)
-    return case
+    checks.check_cross(case, sources)
+    for s, cls in SECTIONS.items():   # keys no layer wrote: the dataclass defaults
+        for f in dataclasses.fields(cls):
+            sources.setdefault(f"{s}.{f.name}", "default")
+    sources.setdefault("name", "default")
+    return case, sources
+
+
+def case_from_dict(data: dict, preset: str | None = None) -> Case:
+    """Validate a parsed TOML dict (+ optional preset) into a :class:`Case` (see :func:`resolve_case`)."""
+    return resolve_case(data, preset)[0]
 
 
 def default_case_text() -> str:
@@ -161,30 +198,66 @@ def default_case_text() -> str:
     return resources.files("fe_joint").joinpath("cases/resonator.toml").read_text()
 
 
+#: a case file is a few kB; anything much larger is not one (and /dev/zero would never end)
+_MAX_CASE_BYTES = 1 << 20
+
+
+def _read_case_file(p: Path) -> str:
+    """The text of a case file; every failure a :class:`CaseError` naming the file."""
+    where = f"case file {str(p)!r}"
+    try:
+        if p.is_dir():
+            raise CaseError(f"{where}: is a folder, not a TOML file")
+        if p.exists() and not p.is_file():
+            raise CaseError(f"{where}: is not a regular file")
+        with open(p, "rb") as f:
+            raw = f.read(_MAX_CASE_BYTES + 1)
+    except OSError as e:
+        raise CaseError(f"{where}: {e.strerror or e}") from None
+    if len(raw) > _MAX_CASE_BYTES:
+        raise CaseError(f"{where}: larger than {_MAX_CASE_BYTES // 1024} kB, not a case file")
+    try:
+        return raw.decode("utf-8-sig")    # a BOM, as some editors write, is fine
+    except UnicodeDecodeError as e:
+        raise CaseError(f"{where}: not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); "
+                        "TOML files must be UTF-8") from None
+
+
+def load_case_with_sources(path: str | Path | None = None,
+                           preset: str | None = None) -> tuple[Case, Sources]:
+    """Read and validate a case file (``None``: the defaults alone); see :func:`resolve_case`.
+
+    Raises:
+        CaseError: unreadable or undecodable file, TOML syntax error, or any invalid value.
+    """
+    if path is None:
+        return resolve_case({}, preset)
+    p = Path(path)
+    text = _read_case_file(p)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise CaseError(f"case file {str(p)!r}: TOML syntax error: {e}") from None
+    return resolve_case(data, preset)
+
+
 def load_case(path: str | Path | None = None, preset: str | None = None) -> Case:
-    """Read and validate a case file (``None``: the embedded default case).
+    """Read and validate a case file (``None``: the embedded default case); see :func:`resolve_case`.
 
     Raises:
         CaseError: unreadable file, TOML syntax error, unknown key, wrong type or range.
     """
-    if path is None:
-        text, where = default_case_text(), "default case"
-    else:
-        p = Path(path)
-        try:
-            text = p.read_text()
-        except OSError as e:
-            raise CaseError(f"case file {str(p)!r}: {e.strerror or e}") from None
-        where = str(p)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise CaseError(f"{where}: TOML syntax error: {e}") from None
-    return case_from_dict(data, preset=preset)
+    return load_case_with_sources(path, preset)[0]
 
 
-def case_to_toml(case: Case) -> str:
-    """Write a case back as TOML (round-trips through :func:`load_case`)."""
+def case_to_toml(case: Case, sources: Sources | None = None) -> str:
+    """Write a case back as TOML (round-trips through :func:`load_case`).
+
+    Args:
+        case: the case.
+        sources: if given (:func:`load_case_with_sources`), each line ends with a comment
+            saying where the value came from: ``# default``, ``# preset quick``, ``# file``.
+    """
     def fmt(v: Any) -> str:
         if isinstance(v, bool):
             return "true" if v else "false"
@@ -196,10 +269,15 @@ def case_to_toml(case: Case) -> str:
             return "[" + ", ".join(fmt(x) for x in v) + "]"
         return str(v)
 
+    def line(key: str, text: str) -> str:
+        if sources is None:
+            return text
+        return f"{text:<40} # {sources.get(key, 'default')}"
+
     d = case.to_dict()
-    lines = [f"name = {fmt(d['name'])}", ""]
+    lines = [line("name", f"name = {fmt(d['name'])}"), ""]
     for s in SECTIONS:
         lines.append(f"[{s}]")
-        lines += [f"{k} = {fmt(v)}" for k, v in d[s].items()]
+        lines += [line(f"{s}.{k}", f"{k} = {fmt(v)}") for k, v in d[s].items()]
         lines.append("")
     return "\n".join(lines)
