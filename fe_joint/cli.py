@@ -101,6 +101,29 @@ def _init_mpi_if_launched() -> None:
         from mpi4py import MPI  # noqa: F401
 
 
+def _import_gmsh_keeping_sigint() -> None:
+    """Import gmsh now, keeping Python's SIGINT handler: gmsh 4.8 sets SIGINT to SIG_DFL when
+    its module is imported (until its first finalize), so Ctrl-C in the mesh stage would kill the
+    process outright, without the message and leaving the lock. With Python's handler, Ctrl-C
+    takes effect when the current gmsh call returns."""
+    if "gmsh" in sys.modules:
+        return
+    try:
+        prev = signal.getsignal(signal.SIGINT)
+    except ValueError:
+        return
+    try:
+        import gmsh  # noqa: F401
+    except ImportError:   # `fe-joint report` and the non-FE stages need no gmsh
+        return
+    finally:
+        if prev is not None:
+            try:
+                signal.signal(signal.SIGINT, prev)
+            except ValueError:   # not the main thread
+                pass
+
+
 def _fail(msg: str, code: int) -> int:
     if _rank() == 0:
         print(f"fe-joint: error: {msg}", file=sys.stderr, flush=True)
@@ -168,6 +191,7 @@ def _dispatch(args: argparse.Namespace) -> int:
         out, option = Path("results") / case.name, "output folder (default; set --out)"
     from mpi4py import MPI
 
+    _import_gmsh_keeping_sigint()
     from .pipeline.runner import run_stages
     from .pipeline.stages import REGISTRY
     comm = MPI.COMM_WORLD
