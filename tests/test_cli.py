@@ -322,3 +322,17 @@ def test_lock_outcome_is_shared_by_every_rank(tmp_path_factory, capsys, calls) -
         if holder is not None:
             holder.kill()
             holder.wait()
+
+
+def test_gmsh_import_keeps_the_ctrl_c_handler() -> None:
+    """gmsh 4.8 sets SIGINT to SIG_DFL on import (Ctrl-C would kill the mesh stage without the
+    message, leaving the lock); the CLI imports it keeping Python's handler."""
+    code = ("import signal, sys\n"
+            "from fe_joint.cli import _import_gmsh_keeping_sigint\n"
+            "if sys.argv[1] == 'plain':\n    import gmsh\n"
+            "else:\n    _import_gmsh_keeping_sigint()\n"
+            "print(signal.getsignal(signal.SIGINT) is signal.default_int_handler)\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    got = {how: subprocess.run([sys.executable, "-c", code, how], capture_output=True, text=True,
+                               env=env).stdout.strip() for how in ("plain", "cli")}
+    assert got == {"plain": "False", "cli": "True"}
