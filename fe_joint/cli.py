@@ -19,12 +19,10 @@ import sys
 from pathlib import Path
 
 from .case import PRESETS, load_case, load_case_with_sources
-from .errors import EXIT_INPUT, CaseError
+from .errors import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED, CaseError
 from .logs import NumericWarnings, configure_logging
 from .pipeline.runner import STAGES
 
-#: exit status after Ctrl-C (128 + SIGINT) and after SIGTERM (128 + SIGTERM)
-EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
 INTERRUPTED = "interrupted: finished stages are kept; run again to resume"
 
 #: environment variables an MPI launcher sets in every rank (Open MPI, MPICH/Hydra, PMIx)

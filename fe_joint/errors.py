@@ -7,6 +7,8 @@ Three kinds of failure, three exit statuses (docs/design.md, "Errors"):
 * a ``ConvergenceError`` of any package (this one for the FE chain, :mod:`hbm`'s,
   :mod:`contact_bem`'s): exit 3, with the residual reached.
 * anything else is a bug: exit 1, "internal error: …", ``--debug`` for the traceback.
+
+An interrupted run (Ctrl-C, SIGTERM) exits 130 or 143 with one line (:mod:`fe_joint.cli`).
 """
 from __future__ import annotations
 
@@ -14,6 +16,8 @@ import contact_bem
 import hbm
 
 EXIT_BUG, EXIT_INPUT, EXIT_CONVERGENCE = 1, 2, 3
+#: after Ctrl-C (128 + SIGINT) and after SIGTERM (128 + SIGTERM; mpirun sends it on Ctrl-C)
+EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
 
 
 class CaseError(ValueError):
