@@ -125,8 +125,8 @@ class Backbone:
         contact: (p, ne, 3, 2H+1) contact harmonics (restarts, post-processing), mm.
         residual: (p,) final relative residual; iterations: (p,) Newton iterations.
         linear_omega, linear_zeta: the linear base mode's frequency (rad/s) and modal damping ratio.
-        onset_amplitude: modal amplitude up to which the mode is the linear one (first slip,
-            separation or closure, ``NonlinearModeProblem.onset_amplitude``); when it lies inside
+        onset_amplitude: modal amplitude up to which w and xi are the linear mode's (first steady
+            slip, separation or closure, ``NonlinearModeProblem.onset_amplitude``); when it lies inside
             the requested range it is one of the points (n_points + 1 points then).
         wall_time: seconds.
     """
@@ -234,19 +234,22 @@ class NonlinearModeProblem:
         return out
 
     def onset_amplitude(self) -> float:
-        """Largest modal amplitude at which the linear mode is exact: every element closed at rest
-        stays stuck and closed, every open one stays open (inf if never).
+        """Largest modal amplitude up to which w and xi are those of the linear mode (inf if never).
 
-        On u = a psi_j cos(wt) (p tangential, q normal part per unit a, N0 = n0 - kn g), a closed
-        element sticks while a (kt |p| + mu kn |q|) <= mu N0 and stays closed while a kn |q| < N0
-        (both worst at cos = +-1, which are samples of the AFT grid, so the sampled and the
-        continuous onset agree); an open one (N0 <= 0) closes at a kn |q| = -N0."""
+        On u = a psi_j cos(wt) (per element: p tangential, q normal amplitude per unit a, the
+        tangential motion along a line; N0 = n0 - kn g), a closed element's periodic state sticks
+        while the tangential force range 2 kt a |p| stays within mu (N(0) + N(pi)) = 2 mu N0,
+        i.e. a <= mu N0 / (kt |p|), and stays closed while a kn |q| < N0; an open one (N0 <= 0)
+        closes at a kn |q| = -N0. (Below the slip bound an element may still slip once on the way
+        from rest, where the AFT march starts, and stick with a shifted slider: that moves the
+        0th harmonic only.) The extremes cos = +-1 are samples of the AFT grid, so the sampled and
+        the continuous onsets agree."""
         c = self.hb.c
         v = self.psi_j.reshape(c.ne, 3)
         p, q = np.hypot(v[:, 0], v[:, 1]), np.abs(v[:, 2])
         N0 = c.n0 - c.kn * c.gap
         with np.errstate(divide="ignore", invalid="ignore"):
-            slip = np.where(c.kt * p + c.mu * c.kn * q > 0, c.mu * N0 / (c.kt * p + c.mu * c.kn * q), np.inf)
+            slip = np.where(c.kt * p > 0, c.mu * N0 / (c.kt * p), np.inf)
             sep = np.where(q > 0, np.abs(N0) / (c.kn * q), np.inf)
         a = np.where(N0 > 0, np.minimum(slip, sep), sep)
         return float(a.min())

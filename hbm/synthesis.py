@@ -62,8 +62,10 @@ class SynthesizedResponse:
         peak_omega: frequency of the peak, rad/s (nan if the peak is outside the backbone).
         peak_amplitude: amplitude at the DOF at the peak, mm (nan likewise).
         peak_mass_amplitude: modal amplitude at the peak, mm·t^0.5.
-        in_range: False if the peak lies below the first or above the last backbone amplitude
-            (then the arrays go up to the backbone's last amplitude).
+        in_range: False if the peak lies above the last backbone amplitude, or below the first
+            one when that is already nonlinear (then the arrays go up to the last amplitude). A
+            peak below a linear first point is in closed form (the arrays then start a decade
+            below it).
     """
 
     mass_amplitude: np.ndarray
@@ -108,6 +110,8 @@ class _Interp:
             self.spl = make_interp_spline(x, y, k=1)
         self.s0, self.s1 = s[0], s[-1]
         self.s = s
+        #: below the first point the mode is the linear one (so a peak there has a closed form)
+        self.linear_below = bool(bb.modal_amplitude[0] <= bb.onset_amplitude)
 
     def _x(self, s):
         return s if self.s_on is None else np.sqrt(np.maximum(s - self.s_on, 0.0))
@@ -162,14 +166,20 @@ def synthesize(bb: Backbone, force, samples: int = 200) -> SynthesizedResponse:
 
     hs = np.array([h(s) for s in ip.s])
     in_range = False
-    s_pk = ip.s1
+    s_pk, s_start = ip.s1, ip.s0
     if hs[0] < 0:
         cross = np.nonzero(hs >= 0)[0]
         if cross.size:
             i = cross[0]
             s_pk = brentq(h, ip.s[i - 1], ip.s[i], xtol=1e-14, rtol=1e-14)
             in_range = True
-    ss = np.linspace(ip.s0, s_pk, int(samples))
+    elif ip.linear_below:
+        # the peak is below the first point, where the mode is linear: a sqrt(D_min) = P
+        w, xv, xf, Pa, _ = ip(ip.s0)
+        s_pk = np.log(Pa * np.exp(ip.s0) / np.sqrt(_dmin(w, xv, xf)[0]))
+        s_start = min(ip.s0, s_pk - np.log(10.0))
+        in_range = True
+    ss = np.linspace(s_start, s_pk, int(samples))
     lo, hi, amp = np.full(ss.size, np.nan), np.full(ss.size, np.nan), np.empty(ss.size)
     for i, s in enumerate(ss):
         w, xv, xf, Pa, ratio = ip(s)

@@ -199,3 +199,17 @@ def test_input_validation():
         hb.nonlinear_mode(0, (1.0, 0.1), dof=0)
     with pytest.raises(ValueError):
         hb.nonlinear_mode(0, (0.1, 1.0), dof=3)
+
+
+def test_snms_linear_peak_below_the_backbone():
+    """A force too small to reach the slip onset: the peak is the linear mode's, in closed form
+    (viscous damping: w_n sqrt(1 - 2 zeta^2), F / (k 2 zeta sqrt(1 - zeta^2))), also below the
+    backbone's first point."""
+    hb = jenkins_1dof(1, 64)
+    bb = hb.nonlinear_mode(0, (0.05, 1.0), dof=0, n_points=6)
+    z, wn, k = C1 / (2 * np.sqrt(2.0)), np.sqrt(2.0), K1 + KT
+    for F in (1e-3, 2e-3):                           # peaks at 0.035, 0.071 mm (onset 0.1)
+        sr = synthesize(bb, np.array([F]))
+        assert sr.in_range
+        assert abs(sr.peak_omega / (wn * np.sqrt(1 - 2 * z * z)) - 1) <= 1e-12
+        assert abs(sr.peak_amplitude / (F / (k * 2 * z * np.sqrt(1 - z * z))) - 1) <= 1e-12
