@@ -11,6 +11,9 @@ Public API (docs/design.md, "Public API")::
     frf = hb.frf(..., settings=ContinuationSettings(max_points=500, max_domega=0.1))  # or the same
                                                  # fields as keywords (max_points=500, ...), not both
     er = hb.element_results(sol)                 # status, energy, mean_normal, u_t, T, N
+    bb = hb.nonlinear_mode(mode=0, amplitudes=(a0, a1), dof=d, n_points=40)   # EPMC backbone
+    bb.omega, bb.zeta, bb.displacement_amplitude, bb.friction_energy, bb.element_status
+    sr = synthesize(bb, force); sr.peak_omega, sr.peak_amplitude, sr.omega_low, sr.omega_high
 """
 from .errors import ConvergenceError
 from .fourier import Fourier
@@ -18,7 +21,9 @@ from .friction import FrictionContacts, STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OP
 from .structure import LinearStructure
 from .harmonic_balance import HarmonicBalance, Solution, ElementResults
 from .continuation import ContinuationSettings, FRFResult
+from .nonlinear_mode import Backbone
+from .synthesis import SynthesizedResponse, synthesize
 
 __all__ = ["ConvergenceError", "Fourier", "FrictionContacts", "LinearStructure", "HarmonicBalance",
            "Solution", "ElementResults", "FRFResult", "ContinuationSettings", "STUCK", "STICK_SLIP",
-           "GROSS_SLIP", "PARTLY_OPEN", "OPEN"]
+           "GROSS_SLIP", "PARTLY_OPEN", "OPEN", "Backbone", "SynthesizedResponse", "synthesize"]

@@ -211,18 +211,25 @@ class HarmonicBalance:
         U[1], U[2] = u.real, -u.imag
         return U
 
-    def gapply(self, omega: float, g: np.ndarray, transpose: bool = False) -> np.ndarray:
+    def gapply(self, omega: float, g: np.ndarray, transpose: bool = False,
+               factors: list[np.ndarray] | None = None, static: bool = True) -> np.ndarray:
         """Receptance times correction-force harmonics, (n_H, n_c) -> (n_H, n_c).
 
         transpose=True applies the transpose of the real harmonic-block operator (G is complex
-        symmetric, so that is the block operator of conj(G))."""
+        symmetric, so that is the block operator of conj(G)).
+
+        Args:
+            factors: modal factors per harmonic h = 0..H to use instead of ``G.modal(h, omega)``
+                (the nonlinear-mode solver applies their derivatives in omega and xi this way).
+            static: add the static residual flexibility (False for such derivatives: it does not
+                depend on omega)."""
         G = self.G
         # static residual flexibility is real and the same for every harmonic: one real product
-        out = (G.R @ g.T).T
+        out = (G.R @ g.T).T if static else np.zeros_like(g)
         cpl = np.concatenate([g[:1], g[1::2] - 1j * g[2::2]]).T          # (nc, H+1)
         PtC = G.Psi.T @ cpl                                               # (m, H+1)
         for h in range(self.H + 1):
-            L = G.modal(h, omega)
+            L = G.modal(h, omega) if factors is None else factors[h]
             if transpose:
                 L = L.conj()
             PtC[:, h] = L * PtC[:, h] if L.ndim == 1 else L @ PtC[:, h]
@@ -590,3 +597,25 @@ class HarmonicBalance:
         if settings is None:
             settings = ContinuationSettings.from_options(**options)
         return continue_frf(self, omega_start, omega_end, force, dof, settings, guess=guess, stop=stop)
+
+    def nonlinear_mode(self, mode: int, amplitudes: tuple[float, float], dof: int, *,
+                       n_points: int = 40, tol: float | None = None, max_iter: int | None = None,
+                       max_halvings: int = 8):
+        """Nonlinear mode (EPMC backbone) by continuation in log amplitude
+        (``nonlinear_mode.continue_backbone``; the formulation is in that module's docstring).
+
+        Args:
+            mode: elastic mode of the linear base (0 = lowest non-rigid mode).
+            amplitudes: (a0, a1), the first and last modal amplitude (coordinate of that
+                mass-normalized linear mode, first harmonic), mm·t^0.5, 0 < a0 < a1.
+            dof: response DOF of ``Backbone.displacement_amplitude``.
+            n_points: log-spaced points from a0 to a1 (>= 2).
+            tol, max_iter: Newton settings (default: this solver's).
+            max_halvings: step halvings allowed between two output points.
+
+        Returns:
+            Backbone (ConvergenceError if a step cannot be completed).
+        """
+        from .nonlinear_mode import continue_backbone
+        return continue_backbone(self, mode, amplitudes, dof, n_points=n_points, tol=tol,
+                                 max_iter=max_iter, max_halvings=max_halvings)

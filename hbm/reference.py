@@ -4,6 +4,9 @@
   element (spring kt in series with a Coulomb slider of limit fs) under x = A cos(theta).
 * ``jenkins_frf_h1``: the closed-form single-harmonic (H = 1) response of the 1-DOF Jenkins
   oscillator m x'' + c x' + k x + f_J(x) = F cos(w t).
+* ``jenkins_backbone_h1``: the closed-form single-harmonic nonlinear mode (EPMC backbone) of the
+  same oscillator: frequency from the in-phase, damping from the dissipative describing-function
+  coefficient.
 * ``StickSlipIntegrator``: exact event-driven time integration of a small linear structure with
   1D Jenkins elements: within each stick/slip phase the motion is linear with harmonic forcing
   and is evaluated in closed form (eigen-decomposition of the phase's state matrix); the
@@ -66,6 +69,30 @@ def jenkins_frf_h1(omega: float, m: float, k: float, c: float, kt: float, fs: fl
     for i in np.nonzero(np.sign(vals[:-1]) * np.sign(vals[1:]) < 0)[0]:
         roots.append(brentq(resid, grid[i], grid[i + 1], xtol=1e-15 * grid[i + 1], rtol=1e-14))
     return np.sort(np.array(roots))
+
+
+def jenkins_backbone_h1(A, m: float, k: float, c: float, kt: float, fs: float):
+    """Single-harmonic (H = 1) nonlinear mode of m x'' + c x' + k x + f_J(x) = 0 (EPMC).
+
+    With x = A cos(theta) and f_J = a1 cos + b1 sin (describing function), the balance of
+    m x'' + (c - xi m) x' + k x + f_J = 0 gives, from the cos and sin terms,
+    w^2 = (k + a1/A) / m and xi = c/m - b1 / (m w A) (b1 < 0 while slipping).
+
+    Args:
+        A: displacement amplitude(s), mm (> 0).
+        m, k, c: mass (t), stiffness (N/mm), viscous damping (N·s/mm).
+        kt, fs: Jenkins stiffness (N/mm) and slip force (N).
+
+    Returns:
+        (omega rad/s, xi 1/s, zeta = xi / (2 omega), W friction energy per cycle N·mm).
+    """
+    A = np.asarray(A, dtype=float)
+    if np.any(A <= 0) or m <= 0:
+        raise ValueError("A must be > 0 and m > 0")
+    a1, b1, W = jenkins_describing_function(A, kt, fs)
+    w = np.sqrt((k + a1 / A) / m)
+    xi = c / m - b1 / (m * w * A)
+    return w, xi, xi / (2 * w), W
 
 
 class StickSlipIntegrator:

@@ -1,0 +1,445 @@
+"""Nonlinear modes by the Extended Periodic Motion Concept (EPMC, Krack 2015), condensed on the contacts.
+
+Problem
+-------
+The autonomous system M q'' + (C - xi M) q' + K q + f(q, q') = 0 has a periodic solution of
+frequency w for the right artificial damping xi: the negative damping -xi M q' feeds back exactly
+the energy that C and the friction dissipate per cycle. ``(w(a), xi(a))`` along the amplitude a is
+the nonlinear mode; zeta = xi / (2 w) is its damping ratio (for a linear structure with modal
+damping it is the modal damping ratio, exactly).
+
+Condensed formulation (the forced solver's unknowns)
+---------------------------------------------------
+As in ``harmonic_balance`` the unknowns are the harmonics U of the contact relative displacements,
+written about the linear base (contacts closed at rest stuck), g = F_nl(U) - k0 U. In the base's
+mass-normalized modes the damping term only shifts the modal damping, c_k -> c_k - xi (Phi^T M Phi
+= I), so the receptance with xi is the forced one with shifted modal factors. At the linear limit
+(every element stuck, g = 0) that receptance is singular at harmonic 1 for the mode of interest j:
+the motion is the free mode and carries no force. So mode j at harmonic 1 is taken out of the
+receptance and its coordinate is imposed:
+
+* amplitude and phase normalisation: eta_j,1 = a, real (eta_j(t) = a cos(w t) + higher harmonics;
+  the sine coefficient of the mode's first harmonic is 0);
+* contact balance:  R(U, w, xi) = U - a psi_j e_cos + G~(w, xi) g(U) = 0, with G~ the receptance
+  with damping c - xi and without mode j at harmonic 1 (psi_j = B phi_j, e_cos the cos row);
+* the two real equations of mode j at harmonic 1, which fix w and xi:
+      r(U, w, xi) = (lam_j - w^2 + i w (c_j - xi)) a + psi_j^T g_1 = 0,   g_1 = g_a1 - i g_b1.
+
+Unknowns U (n_H x n_c), w, xi; equations n_H n_c + 2. Stuck and open-all-cycle elements have
+dg/dU = 0 as in the forced solver, so each Newton step is the forced solver's reduced linear
+solve (``HarmonicBalance.linsolve``, LU or GMRES on the nonlinear elements only) with three
+right-hand sides (-R, -dR/dw, -dR/dxi), then a 2 x 2 solve for (dw, dxi) (block elimination).
+The Jacobian is analytic: the AFT part is the friction elements' exact Jacobian, the w and xi
+derivatives of the modal factors are in closed form.
+
+Needs modal damping diagonal in the linear base's modes (``damping_ratio``, proportional C, or
+none); a coupled damping matrix raises ValueError.
+
+Energy and damping definitions
+------------------------------
+With the modal coordinates eta_h of the kept modes (complex, per harmonic h):
+
+* K = sum_h 1/2 (h w)^2 |eta_h|^2: the kinetic-energy measure (the peak kinetic energy of a
+  single-harmonic motion; 2x the cycle-mean kinetic energy in general);
+* work of the negative damping per cycle: W_xi = xi (2 pi / w) K;
+* dissipation per cycle: friction W_f (work of the retained force harmonics on the contact
+  motion, ``HarmonicBalance.element_results(...).energy``) + viscous W_v = pi w sum_h h^2 eta_h^H C_m eta_h;
+* energy-based damping ratio zeta_E = (W_f + W_v) / (2 pi * 2 K) (= W / (4 pi E_kin,max), the usual
+  definition). The balance W_xi = W_f + W_v holds at every converged point (Galerkin), hence
+  zeta_E = zeta; the tests check it to 1e-8.
+"""
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ConvergenceError
+from .harmonic_balance import Solution
+from .structure import Receptance
+
+
+class _ModeReceptance(Receptance):
+    """The base receptance with modal damping c - xi and mode j removed at harmonic 1."""
+
+    def __init__(self, base: Receptance, j: int) -> None:
+        self.__dict__.update(base.__dict__)        # shares the base's arrays (no copies)
+        self.j = int(j)
+        self.xi = 0.0
+
+    def _full(self, h: int, omega: float) -> np.ndarray:
+        w = h * omega
+        d = self.lam - w * w + 1j * w * (self.cvec - self.xi)
+        if h == 1:
+            d[self.j] = 1.0            # removed by the callers (zero at the linear mode itself)
+        return 1.0 / d
+
+    def modal(self, h: int, omega: float) -> np.ndarray:
+        if h == 0:
+            return Receptance.modal(self, 0, omega)
+        L = self._full(h, omega)
+        if h == 1:
+            L[self.j] = 0.0
+        return L
+
+    def dmodal(self, h: int, omega: float, wrt: str) -> np.ndarray:
+        """d(modal factor)/d(omega) or d/d(xi) (wrt "omega" | "xi"), (m,) complex."""
+        if h == 0:
+            return np.zeros(self.lam.size, dtype=complex)
+        L = self._full(h, omega)
+        dD = (-2.0 * h * h * omega + 1j * h * (self.cvec - self.xi)) if wrt == "omega" \
+            else np.full(L.size, -1j * h * omega)
+        out = -L * L * dD
+        if h == 1:
+            out[self.j] = 0.0
+        return out
+
+
+@dataclass
+class Backbone:
+    """A nonlinear mode sampled along the amplitude (p points).
+
+    Attributes:
+        mode: elastic mode index of the linear base that was continued.
+        dof: response DOF of ``displacement_amplitude``.
+        modal_amplitude: (p,) imposed first-harmonic coordinate a of the mass-normalized linear
+            mode (the continuation parameter), mm·t^0.5.
+        mass_amplitude: (p,) ||eta_1||, the mass norm sqrt(q_1^H M q_1) of the first harmonic over
+            the kept modes (Krack's and tmdsimpy's "modal amplitude"; = modal_amplitude while
+            the mode keeps its linear shape), mm·t^0.5.
+        displacement_amplitude: (p,) first-harmonic amplitude at ``dof``, mm.
+        omega: (p,) frequency, rad/s.
+        xi: (p,) EPMC artificial damping, 1/s.
+        zeta: (p,) xi / (2 omega).
+        zeta_energy: (p,) (friction + viscous energy per cycle) / (2 pi * 2 kinetic), module docstring.
+        xi_viscous: (p,) viscous part of xi, Re(psi^H C_m psi) with psi = eta_1 / ||eta_1|| (what
+            the synthesis scales with the excitation frequency), 1/s.
+        friction_energy, viscous_energy: (p,) energy dissipated per cycle, N·mm.
+        kinetic: (p,) sum_h (h w)^2 |eta_h|^2 / 2, N·mm.
+        element_status: (p, ne) as ``ElementResults.status``.
+        element_energy: (p, ne) friction energy per cycle per element, N·mm.
+        shape: (p, n) complex first-harmonic shape Phi eta_1 / ||eta_1|| (mass-normalized,
+            convention x = Re(shape e^{i w t})), for the force projection of the synthesis.
+        contact: (p, ne, 3, 2H+1) contact harmonics (restarts, post-processing), mm.
+        residual: (p,) final relative residual; iterations: (p,) Newton iterations.
+        linear_omega, linear_zeta: the linear base mode's frequency (rad/s) and modal damping ratio.
+        onset_amplitude: modal amplitude up to which w and xi are the linear mode's (first steady
+            slip, separation or closure, ``NonlinearModeProblem.onset_amplitude``); when it lies inside
+            the requested range it is one of the points (n_points + 1 points then).
+        wall_time: seconds.
+    """
+
+    mode: int
+    dof: int
+    modal_amplitude: np.ndarray
+    mass_amplitude: np.ndarray
+    displacement_amplitude: np.ndarray
+    omega: np.ndarray
+    xi: np.ndarray
+    zeta: np.ndarray
+    zeta_energy: np.ndarray
+    xi_viscous: np.ndarray
+    friction_energy: np.ndarray
+    viscous_energy: np.ndarray
+    kinetic: np.ndarray
+    element_status: np.ndarray
+    element_energy: np.ndarray
+    shape: np.ndarray = field(repr=False)
+    contact: np.ndarray = field(repr=False)
+    residual: np.ndarray = field(repr=False)
+    iterations: np.ndarray = field(repr=False)
+    linear_omega: float = float("nan")
+    linear_zeta: float = float("nan")
+    onset_amplitude: float = float("inf")
+    wall_time: float = 0.0
+
+    @property
+    def xi_work(self) -> np.ndarray:
+        """Work of the negative damping xi M q' per cycle, xi (2 pi / w) K, N·mm."""
+        return self.xi * 2.0 * np.pi / self.omega * self.kinetic
+
+
+class NonlinearModeProblem:
+    """The condensed EPMC equations of one mode (module docstring) and their Newton solver.
+
+    The state is x = (U.ravel(), w, xi); the residual is (R.ravel(), Re r, Im r), with R relative
+    to nothing (mm) and r divided by lam_j a (dimensionless).
+
+    Args:
+        hb: the forced solver (structure, contacts, harmonics, samples, tolerances are its own).
+        mode: elastic mode index of the linear base (0 = lowest non-rigid mode).
+        tol, max_iter: Newton tolerance (relative) and iteration limit (default: hb's).
+    """
+
+    def __init__(self, hb, mode: int, tol: float | None = None, max_iter: int | None = None) -> None:
+        G = hb.G
+        if not G.diag_damping:
+            raise ValueError("nonlinear_mode needs damping that is diagonal in the linear base's "
+                             "modes (damping_ratio=, proportional C or none)")
+        elastic = np.nonzero(~G.rigid)[0]
+        if isinstance(mode, bool) or int(mode) != mode or not (0 <= mode < elastic.size):
+            raise ValueError(f"mode must be an integer in [0, {elastic.size - 1}] (elastic modes "
+                             f"kept), got {mode!r}")
+        self.hb, self.mode = hb, int(mode)
+        self.j = j = int(elastic[int(mode)])
+        self.ep = copy.copy(hb)                 # same solver, modified receptance
+        self.G = self.ep.G = _ModeReceptance(G, j)
+        self.lam_j, self.c_j = float(G.lam[j]), float(G.cvec[j])
+        self.psi_j = G.Psi[:, j].copy()
+        self.tol = hb.tol if tol is None else float(tol)
+        self.max_iter = hb.max_iter if max_iter is None else int(max_iter)
+        if not (0 < self.tol < 1) or self.max_iter < 1:
+            raise ValueError(f"tol must be in (0, 1) and max_iter >= 1, got {tol!r}, {max_iter!r}")
+        self.shape_u = (hb.nH, hb.nc)
+
+    # ------------------------------------------------------------------ pieces
+    def linear_point(self, a: float):
+        """The linear stuck mode at amplitude a: (U, w, xi)."""
+        return self.ua(a), np.sqrt(self.lam_j), self.c_j
+
+    def ua(self, a: float) -> np.ndarray:
+        U = np.zeros(self.shape_u)
+        U[1] = a * self.psi_j
+        return U
+
+    def _eval(self, U, w, xi, a, jacobian=True):
+        self.G.xi = xi
+        R, g, nl, Dg = self.ep.residual(U, w, self.ua(a), jacobian=jacobian)
+        r = ((self.lam_j - w * w + 1j * w * (self.c_j - xi)) * a
+             + self.psi_j @ (g[1] - 1j * g[2])) / (self.lam_j * a)
+        return R, r, g, nl, Dg
+
+    def _dg(self, nl, Dg, X):
+        """dg/dU X for X (n_H, n_c) (nonzero on the nonlinear elements only)."""
+        hb = self.hb
+        out = np.zeros((hb.ne, 3, hb.nH))
+        if nl.size:
+            Xe = hb.to_contact(X)[nl].reshape(nl.size, -1)
+            out[nl] = np.einsum("kxy,ky->kx", Dg, Xe).reshape(nl.size, 3, hb.nH)
+        return hb.from_contact(out)
+
+    def _row(self, dg, a):
+        return self.psi_j @ (dg[1] - 1j * dg[2]) / (self.lam_j * a)
+
+    def _param_derivs(self, g, w, xi, a):
+        """dR/dw, dR/dxi at fixed U and dr/dw, dr/dxi (analytic)."""
+        self.G.xi = xi
+        H = self.hb.H
+        out = []
+        for wrt, dS in (("omega", -2.0 * w + 1j * (self.c_j - xi)), ("xi", -1j * w)):
+            f = [self.G.dmodal(h, w, wrt) for h in range(H + 1)]
+            out.append((self.ep.gapply(w, g, factors=f, static=False), dS / self.lam_j))
+        return out
+
+    def onset_amplitude(self) -> float:
+        """Largest modal amplitude up to which w and xi are those of the linear mode (inf if never).
+
+        On u = a psi_j cos(wt) (per element: p tangential, q normal amplitude per unit a, the
+        tangential motion along a line; N0 = n0 - kn g), a closed element's periodic state sticks
+        while the tangential force range 2 kt a |p| stays within mu (N(0) + N(pi)) = 2 mu N0,
+        i.e. a <= mu N0 / (kt |p|), and stays closed while a kn |q| < N0; an open one (N0 <= 0)
+        closes at a kn |q| = -N0. (Below the slip bound an element may still slip once on the way
+        from rest, where the AFT march starts, and stick with a shifted slider: that moves the
+        0th harmonic only.) The extremes cos = +-1 are samples of the AFT grid, so the sampled and
+        the continuous onsets agree."""
+        c = self.hb.c
+        v = self.psi_j.reshape(c.ne, 3)
+        p, q = np.hypot(v[:, 0], v[:, 1]), np.abs(v[:, 2])
+        N0 = c.n0 - c.kn * c.gap
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slip = np.where(c.kt * p > 0, c.mu * N0 / (c.kt * p), np.inf)
+            sep = np.where(q > 0, np.abs(N0) / (c.kn * q), np.inf)
+        a = np.where(N0 > 0, np.minimum(slip, sep), sep)
+        return float(a.min())
+
+    # ------------------------------------------------------------------ vector form (tests)
+    def split(self, x: np.ndarray):
+        n = self.shape_u[0] * self.shape_u[1]
+        return x[:n].reshape(self.shape_u), float(x[n]), float(x[n + 1])
+
+    def residual(self, x: np.ndarray, a: float) -> np.ndarray:
+        """Residual vector (R.ravel(), Re r, Im r) at state x = (U.ravel(), w, xi), amplitude a."""
+        R, r, *_ = self._eval(*self.split(x), a, jacobian=False)
+        return np.concatenate([R.ravel(), [r.real, r.imag]])
+
+    def jacobian(self, x: np.ndarray, a: float) -> np.ndarray:
+        """Dense analytic Jacobian of :meth:`residual` (small problems: one column per unknown)."""
+        U, w, xi = self.split(x)
+        R, r, g, nl, Dg = self._eval(U, w, xi, a)
+        n = U.size
+        J = np.zeros((n + 2, n + 2))
+        for k in range(n):
+            e = np.zeros(n)
+            e[k] = 1.0
+            E = e.reshape(self.shape_u)
+            dg = self._dg(nl, Dg, E)
+            col = E + self.ep.gapply(w, dg)
+            rr = self._row(dg, a)
+            J[:, k] = np.concatenate([col.ravel(), [rr.real, rr.imag]])
+        for k, (dR, dS) in enumerate(self._param_derivs(g, w, xi, a)):
+            J[:, n + k] = np.concatenate([dR.ravel(), [dS.real, dS.imag]])
+        return J
+
+    # ------------------------------------------------------------------ Newton
+    def _merit(self, R, r, U, a):
+        sU = max(np.linalg.norm(U), np.linalg.norm(self.psi_j) * a, 1e-300)
+        return np.hypot(np.linalg.norm(R) / sU, abs(r)), sU
+
+    def solve(self, a: float, U: np.ndarray, w: float, xi: float):
+        """Damped Newton at amplitude a from (U, w, xi).
+
+        Returns:
+            (U, w, xi, relative residual, iterations, g, nl).
+        """
+        R, r, g, nl, Dg = self._eval(U, w, xi, a)
+        phi, sU = self._merit(R, r, U, a)
+        step = np.inf
+        for it in range(self.max_iter + 1):
+            if phi <= self.tol or (phi <= 10 * self.tol and step <= 10 * self.tol):
+                return U, w, xi, phi, it, g, nl
+            if it == self.max_iter:
+                break
+            (dRw, dSw), (dRx, dSx) = self._param_derivs(g, w, xi, a)
+            X0, Xw, Xx = self.ep.linsolve(w, nl, Dg, [-R, -dRw, -dRx])
+            cw = self._row(self._dg(nl, Dg, Xw), a) + dSw
+            cx = self._row(self._dg(nl, Dg, Xx), a) + dSx
+            b = -r - self._row(self._dg(nl, Dg, X0), a)
+            A = np.array([[cw.real, cx.real], [cw.imag, cx.imag]])
+            try:
+                dw, dxi = np.linalg.solve(A, [b.real, b.imag])
+            except np.linalg.LinAlgError:
+                raise ConvergenceError(f"singular EPMC Newton system at a = {a:.6g}", phi) from None
+            dU = X0 + Xw * dw + Xx * dxi
+            alpha = 1.0
+            for _ in range(12):
+                Ut, wt, xt = U + alpha * dU, w + alpha * dw, xi + alpha * dxi
+                if wt > 0:
+                    ev = self._eval(Ut, wt, xt, a)
+                    phit, sUt = self._merit(ev[0], ev[1], Ut, a)
+                    if phit <= (1 - 1e-4 * alpha) * phi:
+                        break
+                alpha *= 0.5
+            else:
+                break
+            step = alpha * max(np.linalg.norm(dU) / sU, abs(dw) / w, abs(dxi) / w)
+            U, w, xi = Ut, wt, xt
+            R, r, g, nl, Dg = ev
+            phi, sU = phit, sUt
+        raise ConvergenceError(f"EPMC Newton did not converge at modal amplitude {a:.6g}", phi)
+
+    # ------------------------------------------------------------------ post-processing
+    def modal_coordinates(self, g: np.ndarray, w: float, xi: float, a: float) -> np.ndarray:
+        """Kept-mode coordinates eta (m, H+1) complex of the solution with correction forces g."""
+        self.G.xi = xi
+        G, H = self.G, self.hb.H
+        gc = np.concatenate([g[:1], g[1::2] - 1j * g[2::2]]).T        # (nc, H+1)
+        PtG = -(G.Psi.T @ gc)
+        eta = np.stack([G.modal(h, w) * PtG[:, h] for h in range(H + 1)], axis=1)
+        eta[self.j, 1] += a
+        return eta
+
+    def point(self, a, U, w, xi, g, dof):
+        """Everything the Backbone stores about one converged point."""
+        hb, G = self.hb, self.G
+        eta = self.modal_coordinates(g, w, xi, a)
+        h = np.arange(hb.H + 1)
+        e2 = np.abs(eta) ** 2
+        kin = 0.5 * np.sum((h * w) ** 2 * e2)
+        Wv = np.pi * w * np.sum(h ** 2 * (G.cvec[:, None] * e2))
+        eta1 = eta[:, 1]
+        amass = float(np.linalg.norm(eta1))
+        psi = eta1 / amass
+        xi_v = float(np.real(np.conj(psi) @ (G.cvec * psi)))
+        y = -(hb.B.T @ g.T).T
+        qd = self.ep._recover_dofs(w, y, dof)
+        qd[1] += a * G.Phi[dof, self.j]
+        er = hb.element_results(Solution(w, None, hb.to_contact(U).copy(), 0.0, 0, 0))
+        Wf = float(er.energy.sum())
+        return dict(mass_amplitude=amass, displacement_amplitude=float(np.hypot(qd[1], qd[2])),
+                    kinetic=kin, viscous_energy=Wv, friction_energy=Wf, xi_viscous=xi_v,
+                    zeta_energy=(Wf + Wv) / (4.0 * np.pi * kin), shape=G.Phi @ psi,
+                    element_status=er.status, element_energy=er.energy)
+
+
+def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40,
+                      tol: float | None = None, max_iter: int | None = None,
+                      max_halvings: int = 8) -> Backbone:
+    """Natural-parameter continuation of the nonlinear mode in log amplitude (secant predictor).
+
+    The backbone is a function of the amplitude, so the amplitude is the parameter: output points
+    at ``n_points`` log-spaced modal amplitudes from a0 to a1; the first starts from the linear
+    stuck mode, each next one from the secant through the last two points in log a (of U/a, w and
+    xi). A failed Newton halves the step in log a (intermediate points are not reported), at most
+    ``max_halvings`` times in a row.
+
+    Args: see ``HarmonicBalance.nonlinear_mode``.
+
+    Returns:
+        Backbone.
+    """
+    t0 = time.perf_counter()
+    try:
+        a0, a1 = (float(v) for v in amplitudes)
+    except (TypeError, ValueError):
+        raise ValueError(f"amplitudes must be a pair (a0, a1), got {amplitudes!r}") from None
+    if not (np.isfinite(a0) and np.isfinite(a1) and 0 < a0 < a1):
+        raise ValueError(f"amplitudes must satisfy 0 < a0 < a1 (finite), got {amplitudes!r}")
+    if isinstance(n_points, bool) or int(n_points) != n_points or n_points < 2:
+        raise ValueError(f"n_points must be an integer >= 2, got {n_points!r}")
+    if isinstance(dof, bool) or int(dof) != dof or not (0 <= dof < hb.s.n):
+        raise ValueError(f"dof must be an integer in [0, {hb.s.n - 1}], got {dof!r}")
+    prob = NonlinearModeProblem(hb, mode, tol, max_iter)
+    targets = np.geomspace(a0, a1, int(n_points))
+    onset = prob.onset_amplitude()
+    if a0 < onset < a1:
+        # the backbone has a corner there (xi leaves its linear value): a point exactly at the
+        # corner lets the synthesis interpolate each side on its own
+        targets = np.sort(np.append(targets, onset))
+    U, w, xi = prob.linear_point(a0)
+    U, w, xi, res, it, g, nl = prob.solve(a0, U, w, xi)
+    hist = [(a0, U / a0, w, xi)]
+    rows = [(a0, U, w, xi, g, res, it)]
+    for at in targets[1:]:
+        halvings = 0
+        while True:
+            ac, Uc, wc, xc = hist[-1]
+            a_try = ac * (at / ac) ** (0.5 ** halvings)
+            if len(hist) > 1:
+                ap, Up, wp, xp = hist[-2]
+                rho = np.log(a_try / ac) / np.log(ac / ap)
+                guess = (a_try * (Uc + rho * (Uc - Up)), wc + rho * (wc - wp), xc + rho * (xc - xp))
+            else:
+                guess = (a_try * Uc, wc, xc)
+            try:
+                U, w, xi, res, it, g, nl = prob.solve(a_try, *guess)
+            except ConvergenceError as err:
+                halvings += 1
+                if halvings > max_halvings:
+                    raise ConvergenceError(f"nonlinear mode: no step from modal amplitude {ac:.6g} "
+                                           f"towards {at:.6g} after {max_halvings} halvings",
+                                           err.residual) from err
+                continue
+            hist = hist[-1:] + [(a_try, U / a_try, w, xi)]
+            if a_try == at:
+                break
+            halvings = max(halvings - 1, 0)
+        rows.append((at, U, w, xi, g, res, it))
+    pts = [prob.point(a, U, w, xi, g, int(dof)) for a, U, w, xi, g, _, _ in rows]
+    col = {k: np.array([p[k] for p in pts]) for k in pts[0]}
+    om = np.array([r[2] for r in rows])
+    xis = np.array([r[3] for r in rows])
+    return Backbone(mode=prob.mode, dof=int(dof), modal_amplitude=np.array([r[0] for r in rows]),
+                    mass_amplitude=col["mass_amplitude"],
+                    displacement_amplitude=col["displacement_amplitude"], omega=om, xi=xis,
+                    zeta=xis / (2 * om), zeta_energy=col["zeta_energy"],
+                    xi_viscous=col["xi_viscous"], friction_energy=col["friction_energy"],
+                    viscous_energy=col["viscous_energy"], kinetic=col["kinetic"],
+                    element_status=col["element_status"], element_energy=col["element_energy"],
+                    shape=col["shape"], contact=np.stack([hb.to_contact(r[1]) for r in rows]),
+                    residual=np.array([r[5] for r in rows]),
+                    iterations=np.array([r[6] for r in rows]),
+                    linear_omega=float(np.sqrt(prob.lam_j)),
+                    linear_zeta=prob.c_j / (2 * np.sqrt(prob.lam_j)), onset_amplitude=onset,
+                    wall_time=time.perf_counter() - t0)

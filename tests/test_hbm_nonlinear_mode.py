@@ -1,0 +1,215 @@
+"""Nonlinear modes (EPMC) and single-nonlinear-mode synthesis (hbm.nonlinear_mode, hbm.synthesis)."""
+import numpy as np
+import pytest
+import scipy.linalg as sla
+from scipy.optimize import brentq, minimize_scalar
+
+from hbm import FrictionContacts, HarmonicBalance, LinearStructure
+from hbm.nonlinear_mode import NonlinearModeProblem
+from hbm.reference import jenkins_backbone_h1, jenkins_describing_function
+from hbm.synthesis import synthesize
+
+# 1-DOF Jenkins oscillator as in test_hbm_oscillator: stuck mode sqrt(2) rad/s, slip onset at
+# |x| = fs / kt = 0.1 mm, gross slip tends to 1 rad/s.
+M1, K1, C1, KT, FS = 1.0, 1.0, 0.02, 1.0, 0.1
+
+
+def jenkins_1dof(H, nt, c=C1, tol=1e-11):
+    s = LinearStructure([[M1]], [[K1]], [[c]])
+    con = FrictionContacts(np.array([[[0, -1, -1], [-1, -1, -1]]]), kt=KT, kn=1.0, mu=FS, n0=1.0)
+    return HarmonicBalance(s, con, harmonics=H, samples=nt, tol=tol)
+
+
+def grounded(dofs):
+    """1D Jenkins elements from each DOF to ground (t2 and n grounded, constant n0 = 1)."""
+    return np.array([[[d, -1, -1], [-1, -1, -1]] for d in dofs])
+
+
+def test_h1_backbone_equals_describing_function_and_energy_balance():
+    # n_t = 4096: the sampled AFT's O(1/n_t^2) error at the slip kinks is 3e-7 in zeta here
+    # (5e-6 at 1024)
+    hb = jenkins_1dof(1, 4096)
+    bb = hb.nonlinear_mode(0, (0.05, 5.0), dof=0, n_points=12)
+    # the branch crosses every regime: stuck, stick-slip, gross slip
+    assert {0, 1, 2} <= set(bb.element_status[:, 0].tolist())
+    A = bb.displacement_amplitude
+    assert np.allclose(A, bb.modal_amplitude, rtol=1e-12)       # m = 1: x = eta
+    w, xi, zeta, W = jenkins_backbone_h1(A, M1, K1, C1, KT, FS)
+    assert np.max(np.abs(bb.omega / w - 1)) <= 1e-6
+    assert np.max(np.abs(bb.zeta / zeta - 1)) <= 1e-6
+    assert np.max(np.abs(bb.friction_energy - W) / W.max()) <= 1e-6
+    # energy balance at every point: work of -xi M q' = friction + viscous dissipation
+    assert np.max(np.abs(bb.xi_work / (bb.friction_energy + bb.viscous_energy) - 1)) <= 1e-8
+    assert np.max(np.abs(bb.zeta_energy / bb.zeta - 1)) <= 1e-8
+    # softening and the damping rise then fall (friction damping peaks in microslip)
+    assert np.all(np.diff(bb.omega) <= 1e-12) and bb.omega[-1] < 1.1
+    assert bb.zeta.max() > 10 * bb.zeta[0] and bb.zeta[-1] < bb.zeta.max()
+
+
+def test_energy_balance_without_viscous_damping_h3():
+    hb = jenkins_1dof(3, 256, c=0.0)
+    bb = hb.nonlinear_mode(0, (0.08, 2.0), dof=0, n_points=8)
+    slipping = bb.friction_energy > 0
+    assert slipping.sum() >= 6 and np.all(bb.viscous_energy == 0)
+    rel = np.abs(bb.xi_work[slipping] / bb.friction_energy[slipping] - 1)
+    assert rel.max() <= 1e-8
+    assert np.all(bb.xi[~slipping] == 0.0)
+
+
+def _two_dof(C=None, damping_ratio=None, H=1, nt=512, kt=KT, dofs=(0,)):
+    M = np.diag([1.0, 2.0])
+    K = np.array([[2.0, -1.0], [-1.0, 1.5]])
+    s = LinearStructure(M, K, C=C, damping_ratio=damping_ratio)
+    con = FrictionContacts(grounded(dofs), kt=kt, kn=1.0, mu=FS, n0=1.0)
+    return M, K, HarmonicBalance(s, con, harmonics=H, samples=nt, tol=1e-11)
+
+
+def test_small_amplitude_is_the_linear_stuck_mode():
+    M = np.diag([1.0, 2.0])
+    K = np.array([[2.0, -1.0], [-1.0, 1.5]])
+    Kb = K + np.diag([KT, 0.0])              # the stuck contact adds kt on DOF 0
+    lam = sla.eigh(Kb, M, eigvals_only=True)
+    alpha, beta = 0.01, 0.002                # C = alpha M + beta K~: modal zeta = alpha/2w + beta w/2
+    _, _, hb = _two_dof(C=alpha * M + beta * Kb)
+    for mode in (0, 1):
+        bb = hb.nonlinear_mode(mode, (1e-4, 2e-4), dof=1, n_points=2)
+        assert np.all(bb.element_status == 0)
+        w = np.sqrt(lam[mode])
+        assert np.max(np.abs(bb.omega / w - 1)) <= 1e-6
+        assert np.max(np.abs(bb.zeta / (alpha / (2 * w) + beta * w / 2) - 1)) <= 1e-6
+
+
+def test_phase_resonance_two_friction_elements():
+    """Symmetric 2-DOF, a Jenkins element on each mass: the antiphase mode keeps its shape, so the
+    EPMC point is the forced response at phase resonance under F = xi w a M phi (the force that
+    balances the mode's damping)."""
+    M = np.eye(2)
+    K = np.array([[1.5, -0.5], [-0.5, 1.5]])
+    s = LinearStructure(M, K, C=0.01 * M)
+    con = FrictionContacts(grounded((0, 1)), kt=KT, kn=1.0, mu=FS, n0=1.0)
+    hb = HarmonicBalance(s, con, harmonics=1, samples=1024, tol=1e-12)
+    bb = hb.nonlinear_mode(1, (0.05, 0.4), dof=0, n_points=4)
+    i = -1
+    assert bb.element_status[i].tolist() == [1, 1]
+    a, w, xi = bb.modal_amplitude[i], bb.omega[i], bb.xi[i]
+    q1 = (bb.shape[i] * bb.mass_amplitude[i]).real
+    F = xi * w * (M @ q1)
+    sols = {}
+
+    def cos_coefficient(om):              # response ~ sin(wt) at phase resonance: a1 = 0
+        sol = hb.solve(om, F, guess=sols.get("last"))
+        sols["last"] = sol
+        return sol.dof_coefficients(0)[1]
+    w_pr = brentq(cos_coefficient, w * (1 - 1e-2), w * (1 + 1e-2), xtol=1e-14, rtol=1e-14)
+    X = hb.solve(w_pr, F, guess=sols["last"]).dof_coefficients(0)
+    assert abs(w_pr / w - 1) <= 1e-6
+    assert abs(np.hypot(X[1], X[2]) / bb.displacement_amplitude[i] - 1) <= 1e-6
+    assert abs(X[2] / bb.displacement_amplitude[i] - np.sign(q1[0])) <= 1e-6   # +90 deg
+
+
+def test_epmc_point_is_the_forced_response_to_its_damping_force():
+    """Non-symmetric 2-DOF (the friction makes the mode complex): the EPMC solution is the forced
+    response to the first harmonic of xi M q' (H = 1), solved by the forced Newton from the
+    linear response."""
+    M, _, hb = _two_dof(damping_ratio=0.005, nt=1024)
+    bb = hb.nonlinear_mode(0, (0.4, 2.0), dof=1, n_points=4)
+    for i in (1, 3):
+        assert bb.element_status[i, 0] in (1, 2)
+        q1 = bb.shape[i] * bb.mass_amplitude[i]              # complex: x = Re(q1 e^{iwt})
+        assert np.abs(q1.imag).max() > 1e-3 * np.abs(q1).max()
+        w = bb.omega[i]
+        F = bb.xi[i] * 1j * w * (M @ q1)                      # phasor of xi M q'
+        U, res, _, _ = hb.newton(w, F, hb.ulin(w, F))
+        Ue = hb.from_contact(bb.contact[i])
+        assert np.linalg.norm(U - Ue) <= 1e-6 * np.linalg.norm(Ue)
+
+
+def test_analytic_jacobian_matches_finite_differences():
+    _, _, hb = _two_dof(damping_ratio=0.005, H=3, nt=256, dofs=(0, 1), kt=(1.0, 0.7))
+    prob = NonlinearModeProblem(hb, 0)
+    a = 1.0
+    U, w, xi, *_ = prob.solve(a, *prob.linear_point(a))
+    x = np.concatenate([U.ravel(), [w, xi]])
+    rng = np.random.default_rng(0)
+    x = x + 1e-3 * rng.standard_normal(x.size) * np.abs(x).max()   # off the solution
+    J = prob.jacobian(x, a)
+    Jfd = np.empty_like(J)
+    for k in range(x.size):
+        h = 1e-7 * max(abs(x[k]), np.abs(x[:-2]).max() if k < x.size - 2 else abs(x[k]))
+        e = np.zeros(x.size)
+        e[k] = h
+        Jfd[:, k] = (prob.residual(x + e, a) - prob.residual(x - e, a)) / (2 * h)
+    # both elements slip somewhere (the AFT part of J is exercised)
+    _, nl, _ = hb.c.evaluate(hb.to_contact(prob.split(x)[0]), hb.fourier, jacobian=False)
+    assert nl.size == 2
+    assert np.abs(J - Jfd).max() <= 1e-6 * np.abs(J).max()
+
+
+def _forced_peak(hb, F, w_lo, w_hi):
+    """Peak of the forced FRF (HarmonicBalance.frf), polished by maximizing the amplitude."""
+    fr = hb.frf(w_lo, w_hi, np.array([F]), dof=0, stability="none", max_domega=0.01)
+    k = int(np.argmax(fr.amplitude))
+    assert 0 < k < len(fr.omega) - 1
+    last = [fr.solutions[k]]
+
+    def neg(om):
+        last[0] = hb.solve(om, np.array([F]), guess=last[0])
+        return -last[0].amplitude(0)
+    r = minimize_scalar(neg, bounds=(fr.omega[k - 1], fr.omega[k + 1]), method="bounded",
+                        options={"xatol": 1e-10})
+    return r.x, -r.fun
+
+
+@pytest.mark.parametrize("H, nt, tol_w, tol_a", [(1, 512, 1e-4, 1e-4), (3, 256, 1e-3, 1e-2)])
+def test_snms_peak_vs_forced_frf(H, nt, tol_w, tol_a):
+    # H = 1: the synthesis is exact for one DOF (the derivation keeps the viscous part on the
+    # excitation frequency); what is left is the spline between the backbone points and the AFT
+    # (measured <= 1e-6 in frequency, 3e-6 in amplitude). H = 3: the single-mode, first-harmonic
+    # projection (measured 3e-4 / 3e-3).
+    hb = jenkins_1dof(H, nt)
+    bb = hb.nonlinear_mode(0, (0.05, 20.0), dof=0, n_points=40)
+    for F in (0.1, 0.3):
+        sr = synthesize(bb, np.array([F]))
+        assert sr.in_range
+        w_pk, a_pk = _forced_peak(hb, F, 0.95, 1.2)
+        assert abs(sr.peak_omega / w_pk - 1) <= tol_w
+        assert abs(sr.peak_amplitude / a_pk - 1) <= tol_a
+        if H == 1:
+            # every point of both synthesized branches satisfies the closed-form H = 1 balance
+            # A |k - m W^2 + a1/A + i (c W - b1/A)| = F (independent describing function); the
+            # residual is the backbone spline's error amplified by 1/zeta near the peak
+            A = sr.amplitude
+            a1, b1, _ = jenkins_describing_function(A, KT, FS)
+            # the branch below the mode exists from the quasi-static response up (the linear
+            # one, F / (k + kt), while stuck), the one above at every amplitude
+            assert np.all(np.isfinite(sr.omega_high))
+            assert np.all(np.isfinite(sr.omega_low) <= (A > F / (K1 + KT)))
+            assert np.isfinite(sr.omega_low).sum() >= 0.5 * A.size
+            for om in (sr.omega_low, sr.omega_high):
+                ok = np.isfinite(om)
+                D = K1 - M1 * om[ok] ** 2 + a1[ok] / A[ok] + 1j * (C1 * om[ok] - b1[ok] / A[ok])
+                assert np.max(np.abs(A[ok] * np.abs(D) - F)) <= 1e-3 * F
+
+
+def test_input_validation():
+    hb = jenkins_1dof(1, 64)
+    with pytest.raises(ValueError):
+        hb.nonlinear_mode(1, (0.1, 1.0), dof=0)          # only one mode
+    with pytest.raises(ValueError):
+        hb.nonlinear_mode(0, (1.0, 0.1), dof=0)
+    with pytest.raises(ValueError):
+        hb.nonlinear_mode(0, (0.1, 1.0), dof=3)
+
+
+def test_snms_linear_peak_below_the_backbone():
+    """A force too small to reach the slip onset: the peak is the linear mode's, in closed form
+    (viscous damping: w_n sqrt(1 - 2 zeta^2), F / (k 2 zeta sqrt(1 - zeta^2))), also below the
+    backbone's first point."""
+    hb = jenkins_1dof(1, 64)
+    bb = hb.nonlinear_mode(0, (0.05, 1.0), dof=0, n_points=6)
+    z, wn, k = C1 / (2 * np.sqrt(2.0)), np.sqrt(2.0), K1 + KT
+    for F in (1e-3, 2e-3):                           # peaks at 0.035, 0.071 mm (onset 0.1)
+        sr = synthesize(bb, np.array([F]))
+        assert sr.in_range
+        assert abs(sr.peak_omega / (wn * np.sqrt(1 - 2 * z * z)) - 1) <= 1e-12
+        assert abs(sr.peak_amplitude / (F / (k * 2 * z * np.sqrt(1 - z * z))) - 1) <= 1e-12
