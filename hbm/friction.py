@@ -63,6 +63,10 @@ SCALAR_LIMIT = 4
 NEWTON_DET = 1e-6
 #: cycle budget of the plain-repetition redo of neutral elements, × max_cycles
 REDO_CYCLES_FACTOR = 5
+#: the redo predicts its closure from the contraction per period after this many periods ...
+GIVE_UP_AFTER = 10
+#: ... and gives up when the predicted periods exceed this multiple of its budget
+GIVE_UP_MARGIN = 2.0
 #: up to this many marched elements the Jacobian recurrence uses a prefix scan
 SCAN_LIMIT = 16
 #: a start force within this relative distance of the limit is on it (it is there up to rounding)
@@ -765,22 +769,56 @@ def _stick_peak(ct, Lc, kt, w, t0):
 
 def _stick_over_scalar(ct, Lc, kt, w, t0=0.0):
     """_stick_peak for one step on Python scalars: (over, tpk); (False, 1.0) when certainly clear."""
-    if t0 == 0.0:
-        d = (ct[0] - w, ct[1], ct[2], ct[3])
-        # |kt (u_t - w)| <= kt sum |d_i| and L >= L_0 - sum |L_i| (i > 0) on [0, 1]: deep inside
-        if kt * (abs(d[0]) + abs(d[1]) + abs(d[2]) + abs(d[3])) <= (
-                Lc[0] - abs(Lc[1]) - abs(Lc[2]) - abs(Lc[3])):
-            return False, 1.0
-        k2 = kt * kt
-        a = [0.0] * 7
-        for i in range(4):
-            for j in range(4):
-                a[i + j] += k2 * (d[i] * d[j].conjugate()).real - Lc[i] * Lc[j]
-        if max(sum(_BERN_L[k][i] * a[i] for i in range(k + 1)) for k in range(7)) <= 0.0:
-            return False, 1.0
-    over, t = _stick_peak(np.array([ct]), np.array([Lc]), np.array([kt]), np.array([w]),
-                          np.array([float(t0)]))
-    return bool(over[0]), float(t[0])
+    d = (ct[0] - w, ct[1], ct[2], ct[3])
+    # |kt (u_t - w)| <= kt sum |d_i| and L >= L_0 - sum |L_i| (i > 0) on [0, 1]: deep inside
+    if t0 == 0.0 and kt * (abs(d[0]) + abs(d[1]) + abs(d[2]) + abs(d[3])) <= (
+            Lc[0] - abs(Lc[1]) - abs(Lc[2]) - abs(Lc[3])):
+        return False, 1.0
+    k2 = kt * kt
+    a = [0.0] * 7
+    for i in range(4):
+        for j in range(4):
+            a[i + j] += k2 * (d[i] * d[j].conjugate()).real - Lc[i] * Lc[j]
+    if t0 == 0.0 and max(sum(_BERN_L[k][i] * a[i] for i in range(k + 1)) for k in range(7)) <= 0.0:
+        return False, 1.0
+    return _stick_peak_scalar(a, ct, Lc, kt, w, float(t0))
+
+
+def _hornerl(a, t: float) -> float:
+    """sum_k a[k] t^k for a list a (Python scalars)."""
+    v = a[-1]
+    for k in range(len(a) - 2, -1, -1):
+        v = v * t + a[k]
+    return v
+
+
+def _stick_peak_scalar(a, ct, Lc, kt: float, w: complex, t0: float):
+    """_stick_peak for one step on Python scalars, given the excess coefficients a (list of 7):
+    the same grid search and Newton refinement (a numpy call per step cost 10x more on the few
+    elements marched one by one). Returns (over, tpk)."""
+    G, tg = [], []
+    for i in range(PEAK_GRID + 1):
+        t = t0 + (1.0 - t0) * (i / PEAK_GRID)
+        tg.append(t)
+        G.append(_hornerl(a, t))
+    m = max(range(PEAK_GRID + 1), key=G.__getitem__)
+    t = tg[m]
+    lo, hi = tg[max(m - 1, 0)], tg[min(m + 1, PEAK_GRID)]
+    a1 = [a[k] * k for k in range(1, 7)]
+    a2 = [a1[k] * k for k in range(1, 6)]
+    for _ in range(8):
+        g2 = _hornerl(a2, t)
+        step = _hornerl(a1, t) / g2 if g2 < 0.0 else 0.0
+        tn = min(max(t - step, lo), hi)
+        if abs(tn - t) <= ROOT_TOL:
+            t = tn
+            break
+        t = tn
+    if not _hornerl(a, t) > G[m]:
+        t = tg[m]
+    L = _poly(Lc, t)
+    over = kt * abs(_poly(ct, t) - w) - L > PEAK_TOL * max(max(L, _poly(Lc, 1.0)), 1e-300)
+    return over, t
 
 
 # ---------------------------------------------------------------------------- one period
@@ -930,6 +968,27 @@ def _switch_steps(tab: _StepTables, rows, rec: _Record, w, pos, ev) -> None:
 
 
 
+
+
+def _give_up_if_slow(st: SimpleNamespace, rows: np.ndarray, cycle: int, max_cycles: int) -> None:
+    """Raise ConvergenceError as soon as plain repetition is predicted not to close the elements
+    rows within max_cycles.
+
+    Plain repetition contracts geometrically (w_n - w* ~ rho^n), so after a few cycles the ratio
+    of successive closure errors predicts the cycles still needed. Marching on until the budget
+    is spent (1000 periods on the resonator, most of an evaluation's time with the 4th-order
+    march) ends in the same ConvergenceError; the caller then keeps the Newton-closed state.
+    """
+    if cycle < GIVE_UP_AFTER or not rows.size:
+        return
+    dev, prev = st.dev[rows], st.prev[rows]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = np.where(prev > 0.0, dev / prev, 1.0)
+        need = np.where(rho < 1.0, np.log(st.close_tol / np.maximum(dev, 1e-300))
+                        / np.log(np.where(rho < 1.0, rho, 0.5)), np.inf)
+    if np.any(cycle + need > GIVE_UP_MARGIN * max_cycles):
+        raise ConvergenceError(f"friction cycle predicted not to close in {max_cycles} periods "
+                               f"(contraction {rho.max():.6f} per period)", float(dev.max()))
 
 
 def _cycle_scalar(tl: SimpleNamespace, w: complex) -> _Record:
@@ -1340,12 +1399,15 @@ class FrictionContacts:
         """
         k, nt = tab.ut.shape
         st = SimpleNamespace(tab=tab, final=_Record(k, nt), hist=[], keep=keep, newton=newton,
-                             cyc=np.zeros(k, dtype=int), dev=np.zeros(k),
+                             close_tol=self.close_tol,
+                             cyc=np.zeros(k, dtype=int), dev=np.zeros(k), prev=np.zeros(k),
                              jumped=np.zeros(k, dtype=bool))
         rows, w, cycle = np.arange(k), np.zeros(k, dtype=complex), 0
         while rows.size > SCALAR_LIMIT and cycle < max_cycles:
             cycle += 1
             rows, w = self._after_cycle(st, cycle, rows, w, _cycle_vector(tab, rows, w))
+            if not newton:
+                _give_up_if_slow(st, rows, cycle, max_cycles)
         for i in range(rows.size):
             e, w_e = rows[i:i + 1], w[i:i + 1]
             tl = tab.take(e).scalars()
@@ -1353,6 +1415,8 @@ class FrictionContacts:
                 e, w_e = self._after_cycle(st, c, e, w_e, _cycle_scalar(tl, complex(w_e[0])))
                 if not e.size:
                     break
+                if not newton:
+                    _give_up_if_slow(st, e, c, max_cycles)
         return st.final, st.hist, st.cyc, st.dev.max(), st.jumped
 
     def _after_cycle(self, st: SimpleNamespace, cycle: int, rows, w, rec: _Record):
@@ -1366,6 +1430,7 @@ class FrictionContacts:
         if st.keep:
             st.hist.append((cycle, rows, rec))
         dev = np.abs(rec.wend - w) / st.tab.scale[rows]
+        st.prev[rows] = st.dev[rows]
         st.dev[rows] = dev
         go = np.nonzero(dev > self.close_tol)[0]
         w_next = rec.wend[go]
