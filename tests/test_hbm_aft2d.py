@@ -274,3 +274,21 @@ def test_stick_step_slips_on_excursion_inside_step():
     assert not friction._stick_clear(ct, Lc, np.array(1.0), np.array(0j))
     over, _ = friction._stick_peak(ct[None], Lc[None] / 0.95, np.array([1.0]), np.array([0j]), np.array([0.0]))
     assert not over[0]
+
+
+def test_redo_gives_up_when_contraction_predicts_no_closure():
+    """The plain-repetition redo stops as soon as the contraction per period predicts that the
+    cycle will not close within the budget (it used to march the whole budget, then fail)."""
+    from types import SimpleNamespace
+    from hbm.errors import ConvergenceError
+    rows = np.array([0, 1])
+    st = SimpleNamespace(close_tol=1e-10, dev=np.array([1e-3, 1e-3]), prev=np.array([2e-3, 1.001e-3]))
+    # rho = 0.999 for element 1: log(1e-7) / log(0.999) = 16 110 periods needed, budget 1000
+    with pytest.raises(ConvergenceError, match="predicted"):
+        friction._give_up_if_slow(st, rows, friction.GIVE_UP_AFTER, 1000)
+    # rho = 0.5 for both: 24 periods needed, well inside the budget
+    st.prev = np.array([2e-3, 2e-3])
+    friction._give_up_if_slow(st, rows, friction.GIVE_UP_AFTER, 1000)
+    # before GIVE_UP_AFTER periods the rate is not trusted (transients)
+    st.prev = np.array([2e-3, 1.001e-3])
+    friction._give_up_if_slow(st, rows, friction.GIVE_UP_AFTER - 1, 1000)
