@@ -1,27 +1,53 @@
 """3D friction contact elements (two coupled Jenkins directions + normal spring), vectorized.
 
 Each element joins a DOF triple of body A to one of body B (or ground) in its local frame
-(t1, t2, n). Relative displacement u = q_A - q_B; u_n > 0 closes (DESIGN §3).
+(t1, t2, n). Relative displacement u = q_A - q_B; u_n > 0 closes (docs/design.md, "Units and
+conventions").
 
 * Normal: N = max(0, n0 + kn (u_n - g)).
-* Tangential: slider w (2,), trial T* = kt (u_t - w); stick if |T*| <= mu N, else radial return
-  T = mu N T*/|T*| and the slider follows, w = u_t - T/kt (circular Coulomb limit, the two
-  directions are coupled). Separation (N = 0) gives T = 0 and resets the slider, w = u_t.
+* Tangential: slider w, force T = kt (u_t - w) inside the circular Coulomb limit |T| <= L = mu N
+  (the two directions are coupled). While slipping T = L e and the slider moves along e.
+  Separation (N = 0) gives T = 0 and resets the slider, w = u_t.
 * The force added to the structure's left-hand side is (T1, T2, N - n0) on A and the opposite on
   B, so the preloaded rest state u = 0 adds nothing.
 
-The AFT evaluation starts each element from the rest state (w = 0, i.e. the preloaded equilibrium
-with no tangential load) at t = 0, and marches the period sample by sample (elastic predictor,
-radial-return corrector) until the state at t = T equals the state at t = 0 within ``close_tol``.
-Elements that stay closed and within the cone all cycle with w = 0 (stuck) or open all cycle are
-recognized by a vectorized test over all samples and never marched: stuck elements are exactly
-linear (T = kt u_t), open ones carry the constant -n0. The analytic Jacobian of the force
-harmonics is propagated through every step of the march (stick, slip projection, separation),
-including the cycles before closure, so it is the exact derivative of the computed map.
+AFT march (docs/design.md, "Friction dynamics")
+-----------------------------------------------
+Each element starts from rest (w = 0) and the period is marched until the state at t = T equals
+the state at t = 0 within ``close_tol``. Step j goes from sample j-1 to sample j (tau in [0, 1])
+along the cubic through the samples j-2..j+1 of (u_t, u_n), and integrates the element on it:
+
+* stick: w constant;
+* slip: with T = L e, e = exp(i psi) in complex form, de/dtau = a - conj(a) e^2 with
+  a = kt u_t'(tau) / (2 L(tau)) (a Riccati equation). e is the ratio p/q of the linear system
+  (p, q)' = [[0, a], [conj a, 0]] (p, q), so a step is the Möbius map of exp(Omega), Omega the
+  4th-order Magnus exponent on two Gauss points (closed form: Omega^2 is a multiple of I). 1D slip
+  (a parallel to e) is reproduced exactly;
+* switches inside the step are located on the path by safeguarded Newton: closing (N = 0; the
+  slider resets there, or slip starts at once along u_t' when kt |u_t'| > L'), stick -> slip
+  (|kt (u_t - w)| = L; also when the stuck force leaves the limit only between the samples,
+  found from the largest excess on the step, _stick_peak: the end sample alone would miss it
+  and make the force jump where that sample crosses the limit) and slip -> stick (slip rate
+  kt e.u_t' - L' = 0). Opening needs none: the force at the next sample is zero whatever
+  happened before.
+
+2D slip is 4th order in h = 2 pi / n_t (the backward-Euler radial return at each sample used
+before was 1st order); the least accurate steps are those right after a closing into slip, where
+the slip equation is singular (L = 0). The harmonics keep the O(h^2) aliasing of the force's
+kinks (scripts/bench_aft2d.py).
+
+Elements that stay closed and within the cone all along the path from w = 0 (stuck) or open at every
+sample are recognized by a vectorized test and never marched: stuck elements are exactly linear
+(T = kt u_t), open ones carry the constant -n0. The analytic Jacobian of the force harmonics is
+the exact derivative of the computed map: each step's derivative (hand-coded for the common
+full-step slip, forward-mode replay of the recorded switches for the rare switching steps, with
+the switch times differentiated implicitly) is propagated through the closed cycle, and through
+the cycles before closure for elements whose cycle map is neutral.
 """
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -31,11 +57,65 @@ from .fourier import Fourier
 STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OPEN, OPEN = 0, 1, 2, 3, 4
 #: fraction of the cycle spent slipping above which a closed element counts as gross slip
 GROSS_SLIP_FRACTION = 0.9
-#: up to this many marched elements the forward march runs on Python floats (less overhead)
+#: up to this many marched elements the forward march runs on Python scalars (less overhead)
 SCALAR_LIMIT = 4
+#: |det(I - A_cycle)| below which the slider fixed point is treated as neutral (plain iteration)
+NEWTON_DET = 1e-6
+#: cycle budget of the plain-repetition redo of neutral elements, × max_cycles
+REDO_CYCLES_FACTOR = 5
+#: the redo predicts its closure from the contraction per period after this many periods ...
+GIVE_UP_AFTER = 10
+#: ... and gives up when the predicted periods exceed this multiple of its budget
+GIVE_UP_MARGIN = 2.0
+#: up to this many marched elements the Jacobian recurrence uses a prefix scan
+SCAN_LIMIT = 16
+#: a start force within this relative distance of the limit is on it (it is there up to rounding)
+SLIP_TOL = 1e-12
+#: a force this close to the limit (relative) at the start of a stick phase is on it (rounding)
+EDGE_TOL = 1e-12
+#: a stuck force that exceeds the limit between two samples by more than this (relative to the
+#: limit) slips there, even when it is back inside at the step end (see _stick_peak)
+PEAK_TOL = 1e-9
+#: grid of the search for the largest excess of a stick phase (then refined by Newton)
+PEAK_GRID = 16
+#: switches located inside one step (3 occur at n_t = 16 with large 2D motion and separation;
+#: a 4th would be ignored: the step would end in the state then reached)
+MAX_SWITCH = 3
+#: switch times are located to this absolute accuracy in tau (Newton, bisection as safeguard)
+ROOT_TOL, ROOT_ITER = 1e-14, 60
+#: a Newton step shorter than this ends the search (the next would be ~ its square: converged)
+ROOT_NEWTON = 1e-8
+#: steps a round of the vectorized march looks ahead (see _cycle_vector)
+WINDOW = 32
+_WIN = np.arange(WINDOW)
+
+# what a step did: the fast paths, or a step with switches (replayed for the Jacobian)
+STICK_STEP, SLIP_STEP, OPEN_STEP, EVENT_STEP = 0, 1, 2, 3
+# state at the start of a step with switches
+M_STICK, M_SLIP, M_OPEN = 0, 1, 2
+# switches (the _AT ones happen at the start of the phase, their time is not a root)
+(SW_OPEN_STICK, SW_OPEN_SLIP, SW_STICK_SLIP, SW_STICK_SLIP_AT, SW_SLIP_STICK,
+ SW_SLIP_STICK_AT) = range(1, 7)
+
+#: power coefficients of the cubic through the samples at tau = -1, 0, 1, 2 (c = _VINV @ samples)
+_VINV = np.array([[0.0, 1.0, 0.0, 0.0],
+                  [-1.0 / 3.0, -0.5, 1.0, -1.0 / 6.0],
+                  [0.5, -1.0, 0.5, 0.0],
+                  [-1.0 / 6.0, 0.5, -0.5, 1.0 / 6.0]])
+#: sample offsets of the stencil of step j (samples j-2..j+1)
+_STENCIL = np.arange(-2, 2)
+_S6 = math.sqrt(3.0) / 6.0
+#: Gauss–Legendre points of [0, 1] (the 4th-order Magnus step)
+_GAUSS = (0.5 - _S6, 0.5 + _S6)
+#: Lagrange weights l_m(tau_g) and l_m'(tau_g) of the stencil samples at the Gauss points, (2, 4)
+_LG = np.array([[g ** i for i in range(4)] for g in _GAUSS]) @ _VINV
+_DLG = np.array([[i * g ** (i - 1) if i else 0.0 for i in range(4)] for g in _GAUSS]) @ _VINV
+#: derivative slots of a replayed step: Re w, Im w, u_t1 (4 samples), u_t2 (4), u_n (4), tau
+NSLOT = 15
 
 
 def _param(name: str, value, ne: int, lo: float, allow_equal: bool = True) -> np.ndarray:
+    """A parameter as a finite (ne,) array >= lo (> lo unless allow_equal); ValueError if not."""
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 0:
         arr = np.full(ne, float(arr))
@@ -50,43 +130,1094 @@ def _param(name: str, value, ne: int, lo: float, allow_equal: bool = True) -> np
     return arr
 
 
-#: |det(I - A_cycle)| below which the slider fixed point is treated as neutral (plain iteration)
-NEWTON_DET = 1e-6
-#: cycle budget of the plain-repetition redo of neutral elements, × max_cycles
-REDO_CYCLES_FACTOR = 5
+# ---------------------------------------------------------------------------- forward-mode numbers
+class _Dual:
+    """Values v (b,) with their derivatives d (b, NSLOT) w.r.t. real inputs (forward mode).
+
+    Only the replay of switching steps uses it: those steps chain root-found switch times through
+    Magnus steps, and differentiating every branch by hand would be error-prone for few steps.
+    """
+    __slots__ = ("v", "d")
+    __array_ufunc__ = None              # ndarray (op) _Dual defers to the reflected operators
+
+    def __init__(self, v, d) -> None:
+        self.v, self.d = v, d
+
+    @staticmethod
+    def _col(o):
+        o = np.asarray(o)
+        return o[:, None] if o.ndim == 1 else o
+
+    def __add__(self, o):
+        if isinstance(o, _Dual):
+            return _Dual(self.v + o.v, self.d + o.d)
+        return _Dual(self.v + o, self.d)
+
+    __radd__ = __add__
+
+    def __neg__(self):
+        return _Dual(-self.v, -self.d)
+
+    def __sub__(self, o):
+        return self + (-o)
+
+    def __rsub__(self, o):
+        return (-self) + o
+
+    def __mul__(self, o):
+        if isinstance(o, _Dual):
+            return _Dual(self.v * o.v, self.d * o.v[:, None] + o.d * self.v[:, None])
+        return _Dual(self.v * o, self.d * self._col(o))
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, o):
+        if isinstance(o, _Dual):
+            q = self.v / o.v
+            return _Dual(q, (self.d - o.d * q[:, None]) / o.v[:, None])
+        return _Dual(self.v / o, self.d / self._col(o))
+
+    def __rtruediv__(self, o):
+        q = o / self.v
+        return _Dual(q, -self.d * (q / self.v)[:, None])
+
+    def conjugate(self):
+        return _Dual(np.conj(self.v), np.conj(self.d))
+
+    @property
+    def real(self):
+        return _Dual(np.real(self.v), np.real(self.d))
+
+    @property
+    def imag(self):
+        return _Dual(np.imag(self.v), np.imag(self.d))
+
+    def __abs__(self):
+        r = np.abs(self.v)
+        return _Dual(r, np.real(np.conj(self.v)[:, None] * self.d) / r[:, None])
 
 
-def _cycle_matrix(closed, slip, rho, that):
-    """Derivative of the end-of-cycle slider w.r.t. the start slider, (k, 2, 2): prod_j A_j with
-    A_j = I (stick), rho (I - t t^T) (slip), 0 (open)."""
-    k, nt = closed.shape
-    P = np.broadcast_to(np.eye(2), (k, 2, 2)).copy()
-    eye = np.eye(2)
-    for j in np.nonzero(~(closed & ~slip).all(axis=0))[0]:
-        t = that[:, j]
-        A = np.where((closed[:, j] & ~slip[:, j])[:, None, None], eye,
-                     rho[:, j, None, None] * (eye - t[:, :, None] * t[:, None, :]))
-        P = A @ P
-    return P
+# ---------------------------------------------------------------------------- path and slip step
+# These work on Python scalars (few-element march), numpy arrays (vectorized march) and _Dual
+# (Jacobian replay) alike. c is a tuple of the 4 power coefficients of a cubic in tau.
+def _poly(c, t):
+    """sum c_i t^i (Horner)."""
+    return c[0] + t * (c[1] + t * (c[2] + t * c[3]))
 
 
-def _newton_restart(w_start, w_end, P, active):
-    """Next cycle's start slider: Newton step on w = Phi(w) (the cycle map is piecewise affine in
-    w with slope P), which closes 2D stick-slip cycles in a few periods instead of the slow
-    geometric convergence of plain repetition. Neutral elements (det(I - P) ~ 0, e.g. sticking
-    all the closing cycle) keep the plain repetition, i.e. their history from rest."""
-    M = np.eye(2) - P
-    det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
-    ok = active & (np.abs(det) > NEWTON_DET)
-    w = w_end.copy()
-    if ok.any():
-        d = (w_end - w_start)[ok]
-        w[ok] = w_start[ok] + np.linalg.solve(M[ok], d[:, :, None])[:, :, 0]
+def _dpoly(c, t):
+    """d/dt of _poly."""
+    return c[1] + t * (2.0 * c[2] + t * (3.0 * c[3]))
+
+
+def _cs_array(x: np.ndarray, deriv: bool = False):
+    """(c, s) proportional to (cosh r, sinh r / r), r = sqrt(x), for real x of any sign.
+
+    x >= 0 is scaled by 1 / cosh r (c = 1, s = tanh r / r: no overflow in deep slip); x < 0 is
+    (cos r', sin r' / r'), r' = sqrt(-x). The Möbius map does not see the scale. With deriv, also
+    dc/dx and ds/dx. Series below |x| = 1e-4 avoid the cancellation.
+    """
+    r = np.sqrt(np.abs(x))
+    pos = x >= 0.0
+    small = r < 1e-2
+    th = np.tanh(r)
+    sp = np.where(small, 1.0 + x * (-1.0 / 3.0 + x * (2.0 / 15.0)), th / np.where(small, 1.0, r))
+    cn = np.cos(r)
+    sn = np.sinc(r / np.pi)                                   # sin r / r, exact at 0
+    c, s = np.where(pos, 1.0, cn), np.where(pos, sp, sn)
+    if not deriv:
+        return c, s
+    xs = np.where(small, 1.0, x)
+    dsp = np.where(small, -1.0 / 3.0 + x * (4.0 / 15.0 - x * 17.0 / 105.0), (1.0 - th * th - sp) / (2.0 * xs))
+    dsn = np.where(small, 1.0 / 6.0 + x * (1.0 / 60.0 + x / 1680.0), (cn - sn) / (2.0 * xs))
+    return c, s, np.where(pos, 0.0, 0.5 * sn), np.where(pos, dsp, dsn)
+
+
+def _cs_scalar(x: float):
+    """_cs_array for one Python float (same formulas)."""
+    r = math.sqrt(abs(x))
+    small = r < 1e-2
+    if x >= 0.0:
+        return 1.0, (1.0 + x * (-1.0 / 3.0 + x * (2.0 / 15.0)) if small else math.tanh(r) / r)
+    return math.cos(r), (math.sin(r) / r if r > 0.0 else 1.0)
+
+
+def _cs(x):
+    """_cs_array for arrays, Python floats or _Dual (value and derivative)."""
+    if isinstance(x, _Dual):
+        c, s, dc, ds = _cs_array(x.v, True)
+        return _Dual(c, dc[:, None] * x.d), _Dual(s, ds[:, None] * x.d)
+    if isinstance(x, np.ndarray):
+        return _cs_array(x)
+    return _cs_scalar(x)
+
+
+def _mobius_a(a1, a2, d):
+    """Möbius coefficients (al, be) of a slip step of length d from the Riccati rates a at its
+    two Gauss points: exp(Omega) ∝ [[al, be], [conj be, conj al]], Omega = [[i gam, A], [conj A,
+    -i gam]] with A = d (a1 + a2)/2 (first Magnus term) and gam = (sqrt 3 / 6) d^2 Im(a2 conj a1)
+    (the commutator term); Omega^2 = (|A|^2 - gam^2) I gives the exponential in closed form."""
+    A = (0.5 * d) * (a1 + a2)
+    gam = (_S6 * d * d) * (a2 * a1.conjugate()).imag
+    c, s = _cs((A * A.conjugate()).real - gam * gam)
+    return c + 1j * (s * gam), s * A
+
+
+def _rate(ct, Lc, kt, t):
+    """Riccati rate a = kt u_t'(t) / (2 L(t)) (per unit tau)."""
+    return kt * _dpoly(ct, t) / (2.0 * _poly(Lc, t))
+
+
+def _magnus(ct, Lc, kt, z, ta, tb):
+    """Slip direction z (unit complex) at tau = tb from its value at ta (4th-order Magnus step)."""
+    d = tb - ta
+    al, be = _mobius_a(_rate(ct, Lc, kt, ta + _GAUSS[0] * d), _rate(ct, Lc, kt, ta + _GAUSS[1] * d), d)
+    return (al * z + be) / (be.conjugate() * z + al.conjugate())
+
+
+def _magnus_k(ct, Lc, kt, z, ta, tb):
+    """_magnus and its derivative K = dz(tb)/dz(ta) (the map is holomorphic in z)."""
+    d = tb - ta
+    al, be = _mobius_a(_rate(ct, Lc, kt, ta + _GAUSS[0] * d), _rate(ct, Lc, kt, ta + _GAUSS[1] * d), d)
+    D = be.conjugate() * z + al.conjugate()
+    return (al * z + be) / D, ((al * al.conjugate()).real - (be * be.conjugate()).real) / (D * D)
+
+
+def _slip_rate(ct, Lc, kt, z, t):
+    """kt e.u_t' - L' at t (per unit tau): the slider keeps moving while it is > 0."""
+    return kt * (z.conjugate() * _dpoly(ct, t)).real - _dpoly(Lc, t)
+
+
+def _excess(ct, Lc, kt, w, t):
+    """|kt (u_t(t) - w)| - L(t): > 0 when the stuck force would leave the limit."""
+    return abs(kt * (_poly(ct, t) - w)) - _poly(Lc, t)
+
+
+# Root functions: value and t-derivative (Newton) of the switch conditions.
+def _close_fun(Nc):
+    """N(t) and N'(t): the closing instant is a root of N."""
+    return lambda t: (_poly(Nc, t), _dpoly(Nc, t))
+
+
+def _excess_fun(ct, Lc, kt, w):
+    """_excess at slider w and its t-derivative: stick -> slip is a root of it."""
+    def fun(t):
+        d = _poly(ct, t) - w
+        ad = abs(d)
+        return (kt * ad - _poly(Lc, t),
+                kt * (d.conjugate() * _dpoly(ct, t)).real / (ad + (ad == 0)) - _dpoly(Lc, t))
+    return fun
+
+
+
+
+
+def _stop_quadratic(ct, Lc, kt, z, t0, z1, rate0, rate1):
+    """Power coefficients in s = (tau - t0) / (1 - t0) of the quadratic through the slip rate at
+    the phase start t0 (direction z), the midpoint and the step end (direction z1).
+
+    Slip -> stick is located on it, not on the Magnus solution itself: the slider depends on that
+    time only at second order (at the switch the slip rate vanishes, so the stick and slip
+    trajectories are tangent), the quadratic's time error is O(h^2) in tau, so O(h^6) in the
+    slider; evaluating the Magnus solution inside every Newton iteration cost most of the march,
+    and end slopes would be singular at a closing (L = 0).
+    """
+    tm = 0.5 * (t0 + 1.0)
+    rm = _slip_rate(ct, Lc, kt, _magnus(ct, Lc, kt, z, t0, tm), tm)
+    return rate0, 4.0 * rm - 3.0 * rate0 - rate1, 2.0 * (rate0 + rate1) - 4.0 * rm, 0.0 * rate0
+
+
+def _stop_fun(c, t0):
+    """-(quadratic slip rate) and its tau-derivative (c from _stop_quadratic)."""
+    D = 1.0 - t0
+    return lambda t: (-_poly(c, (t - t0) / D), -_dpoly(c, (t - t0) / D) / D)
+
+
+def _root_vector(fun, lo, hi, flo, fhi):
+    """Roots of fun on [lo, hi] (arrays, flo <= 0 <= fhi): Newton safeguarded by bisection."""
+    den = flo - fhi
+    # regula falsi, kept inside: f may vanish at lo too (a phase starting on the limit)
+    frac = np.where(den < 0, flo / np.where(den < 0, den, -1.0), 0.5)
+    t = lo + (hi - lo) * np.clip(frac, 0.01, 0.99)
+    done = np.zeros(t.shape, dtype=bool)
+    for _ in range(ROOT_ITER):
+        f, df = fun(t)
+        lo = np.where(f < 0, t, lo)
+        hi = np.where(f > 0, t, hi)
+        tn = t - np.divide(f, df, out=np.full(t.shape, np.inf), where=df != 0)
+        newton = (tn > lo) & (tn < hi)
+        tn = np.where(newton, tn, 0.5 * (lo + hi))
+        tn = np.where((f == 0) | done, t, tn)
+        step = np.abs(tn - t)
+        done |= (step <= ROOT_TOL) | (newton & (step <= ROOT_NEWTON))
+        t = tn
+        if done.all():
+            break
+    return t
+
+
+def _root_scalar(fun, lo: float, hi: float, flo: float, fhi: float) -> float:
+    """_root_vector for Python floats."""
+    den = flo - fhi
+    t = lo + (hi - lo) * (min(max(flo / den, 0.01), 0.99) if den < 0 else 0.5)
+    for _ in range(ROOT_ITER):
+        f, df = fun(t)
+        if f == 0:
+            return t
+        if f < 0:
+            lo = t
+        else:
+            hi = t
+        tn = t - f / df if df != 0 else lo
+        newton = lo < tn < hi
+        if not newton:
+            tn = 0.5 * (lo + hi)
+        if abs(tn - t) <= (ROOT_NEWTON if newton else ROOT_TOL):
+            return tn
+        t = tn
+    return t
+
+
+# ---------------------------------------------------------------------------- per-step tables
+class _StepTables:
+    """What the march needs at each step, vectorized over elements (k) and steps (nt).
+
+    Step j goes from sample j-1 to sample j along the cubic through the samples j-2..j+1.
+    Attributes (first axis: element): kt, mu, kn (k,); ut (k, nt) complex u_t1 + i u_t2, mm;
+    N (k, nt) normal force, N; closed (k, nt) N > 0; tcl (k, nt) closed with friction (mu > 0);
+    L (k, nt) limit mu N (0 where not tcl); ct, Nc, Lc (k, nt, 4) cubic coefficients of u_t,
+    n0 + kn (u_n - g) and mu (n0 + kn (u_n - g)); pg, Lg (k, nt, 2) u_t' and L at the Gauss
+    points; al, be (k, nt) Möbius coefficients of a full-step slip; pe, Lpe (k, nt) u_t' and L'
+    at the step end; bad (k, nt) closed at both samples but not at a Gauss point (treated as a
+    reclosing inside the step, searched from tlo); scale (k,) slider length scale, mm.
+    """
+
+    def __init__(self, u, kt, mu, kn, n0, gap) -> None:
+        k, _, nt = u.shape
+        self.kt, self.mu, self.kn = kt, mu, kn
+        self.ut = u[:, 0] + 1j * u[:, 1]
+        nraw = n0[:, None] + kn[:, None] * (u[:, 2] - gap[:, None])
+        self.N = np.maximum(0.0, nraw)
+        self.closed = nraw > 0.0
+        self.tcl = self.closed & (mu > 0.0)[:, None]
+        self.L = np.where(self.tcl, mu[:, None] * self.N, 0.0)
+        st = (np.arange(nt)[:, None] + _STENCIL) % nt
+        self.ct = self.ut[:, st] @ _VINV.T
+        self.Nc = nraw[:, st] @ _VINV.T
+        self.Lc = mu[:, None, None] * self.Nc
+        c, n = tuple(np.moveaxis(self.ct, -1, 0)), tuple(np.moveaxis(self.Nc, -1, 0))
+        self.pg = np.stack([_dpoly(c, g) for g in _GAUSS], axis=-1)
+        ng = np.stack([_poly(n, g) for g in _GAUSS], axis=-1)
+        self.Lg = mu[:, None, None] * ng
+        self.bad = np.roll(self.tcl, 1, axis=1) & self.tcl & (ng <= 0.0).any(axis=-1)
+        self.tlo = np.where(self.bad, np.where(ng[..., 1] <= 0.0, _GAUSS[1], _GAUSS[0]), 0.0)
+        lg = np.where((self.Lg > 0.0).all(axis=-1, keepdims=True), self.Lg, 1.0)
+        a = kt[:, None, None] * self.pg / (2.0 * lg)
+        self.al, self.be = _mobius_a(a[..., 0], a[..., 1], 1.0)
+        self.pe = _dpoly(c, 1.0)
+        self.Lpe = mu[:, None] * _dpoly(n, 1.0)
+        self.scale = np.maximum((mu[:, None] * self.N).max(axis=1), 1e-300) / kt
+        self.det = (self.al * self.al.conj()).real - (self.be * self.be.conj()).real
+
+    def packed(self) -> np.ndarray:
+        """What a round of _advance reads, (k, nt, 6), packed so that one gather serves it."""
+        if not hasattr(self, "_packed"):
+            flags = np.roll(self.tcl, 1, axis=1) + 2.0 * self.tcl + 4.0 * self.bad
+            self._packed = np.stack([self.ut, self.al, self.be, self.pe, self.L + 1j * self.Lpe,
+                                     flags + 0j], axis=-1)
+        return self._packed
+
+    def take(self, rows) -> "_StepTables":
+        new = object.__new__(_StepTables)
+        for name, val in vars(self).items():
+            if name != "_packed":
+                setattr(new, name, val[rows])
+        return new
+
+    def scalars(self) -> SimpleNamespace:
+        """The tables of a one-element set as Python lists (for the scalar march)."""
+        def rows(a):
+            return [tuple(r) for r in a[0].tolist()]
+        return SimpleNamespace(
+            kt=float(self.kt[0]), ut=self.ut[0].tolist(), tcl=self.tcl[0].tolist(),
+            L=self.L[0].tolist(), al=self.al[0].tolist(), be=self.be[0].tolist(),
+            pe=self.pe[0].tolist(), Lpe=self.Lpe[0].tolist(), bad=self.bad[0].tolist(),
+            tlo=self.tlo[0].tolist(), ct=rows(self.ct), Nc=rows(self.Nc), Lc=rows(self.Lc))
+
+    def force(self, rec: "_Record") -> np.ndarray:
+        """Tangential force samples (k, 2, nt), N, of a marched period."""
+        w = np.concatenate([rec.wst[:, 1:], rec.wend[:, None]], axis=1)   # slider at sample j
+        T = np.where(self.tcl, self.kt[:, None] * (self.ut - w), 0.0)
+        return np.stack([T.real, T.imag], axis=1)
+
+
+class _Record:
+    """What each step of one marched period did (the Jacobian replays it), for k elements.
+
+    code (k, nt) STICK/SLIP/OPEN/EVENT_STEP; wst (k, nt) slider at the start of the step, mm;
+    mode0 (k, nt) state at the start of an EVENT_STEP; evc, evt (k, nt, MAX_SWITCH) its switches
+    and their times tau; slip (k, nt) slipped during the step; wend (k,) slider at the end.
+    AP, AQ (k, nt) a switching step's d w_j = AP d w_{j-1} + AQ conj(d w_{j-1}), and cP, cQ (k,)
+    the same for the whole period once cdone (see _cycle_matrix): exact but for the switch-time
+    terms, which are O(h^4) (the trajectories are tangent at stick/slip switches). They only
+    steer the Newton restarts and the neutral test; the Jacobian is exact.
+    """
+
+    def __init__(self, k: int, nt: int) -> None:
+        self.code = np.zeros((k, nt), dtype=np.int8)
+        self.wst = np.zeros((k, nt), dtype=complex)
+        self.mode0 = np.zeros((k, nt), dtype=np.int8)
+        self.evc = np.zeros((k, nt, MAX_SWITCH), dtype=np.int8)
+        self.evt = np.zeros((k, nt, MAX_SWITCH))
+        self.slip = np.zeros((k, nt), dtype=bool)
+        self.AP = np.ones((k, nt), dtype=complex)
+        self.AQ = np.zeros((k, nt), dtype=complex)
+        self.wend = np.zeros(k, dtype=complex)
+        self.cP = np.ones(k, dtype=complex)
+        self.cQ = np.zeros(k, dtype=complex)
+        self.cdone = np.ones(k, dtype=bool)                # cP, cQ are known
+
+    def take(self, rows) -> "_Record":
+        new = object.__new__(_Record)
+        for name, val in vars(self).items():
+            setattr(new, name, val[rows])
+        return new
+
+    def put(self, rows, other: "_Record") -> None:
+        for name, val in vars(other).items():
+            getattr(self, name)[rows] = val
+
+
+
+# ---------------------------------------------------------------------------- switching steps
+class _Switching:
+    """State of the switching steps of one round, vectorized over them (see _events_vector).
+
+    P, Q track d(state) = P d w0 + Q conj(d w0), the state being w in stick and z in slip."""
+
+    def __init__(self, ct, Nc, Lc, kt, w, mode, tlo, u1, L1) -> None:
+        self.ct, self.Nc, self.Lc = ct, Nc, Lc                      # (b, 4)
+        self.kt, self.w, self.mode, self.tlo = kt, w.copy(), mode.copy(), tlo
+        self.u1, self.L1 = u1, L1
+        b = w.size
+        T0 = kt * (ct[:, 0] - w)
+        r0 = np.where(mode == M_SLIP, np.abs(T0), 1.0)
+        self.z = T0 / r0
+        self.P = np.where(mode == M_STICK, 1.0, np.where(mode == M_SLIP, -kt / (2.0 * r0), 0.0)) + 0j
+        self.Q = np.where(mode == M_SLIP, -self.P * self.z ** 2, 0.0)
+        self.t = np.zeros(b)
+        self.run = np.ones(b, dtype=bool)
+        self.slipped = mode == M_SLIP
+        self.codes = np.zeros((b, MAX_SWITCH), dtype=np.int8)
+        self.taus = np.zeros((b, MAX_SWITCH))
+
+    def rows(self, ix):
+        return tuple(self.ct[ix].T), tuple(self.Lc[ix].T), self.kt[ix]
+
+    def switch(self, ix, s, mode, t, code) -> None:
+        self.mode[ix], self.t[ix], self.codes[ix, s], self.taus[ix, s] = mode, t, code, t
+
+    def scale(self, ix, f) -> None:
+        self.P[ix] *= f
+        self.Q[ix] *= f
+
+
+def _sw_close(S: _Switching, ix, s: int) -> None:
+    """Closing inside the step: the slider resets at the root of N, or slip starts there."""
+    ct, Lc, kt = S.rows(ix)
+    Nc = tuple(S.Nc[ix].T)
+    lo = S.tlo[ix]
+    tc = _root_vector(_close_fun(Nc), lo, np.ones(ix.size), _poly(Nc, lo), _poly(Nc, 1.0))
+    pd = _dpoly(ct, tc)
+    ad = np.abs(pd)
+    imm = kt * ad > _dpoly(Lc, tc)            # the force grows faster than the limit: slip at once
+    S.z[ix] = np.where(imm, pd / np.where(imm, ad, 1.0), S.z[ix])
+    S.w[ix] = np.where(imm, S.w[ix], _poly(ct, tc))
+    S.scale(ix, 0.0)                          # the state forgets the start
+    S.slipped[ix] |= imm
+    S.switch(ix, s, np.where(imm, M_SLIP, M_STICK), tc, np.where(imm, SW_OPEN_SLIP, SW_OPEN_STICK))
+
+
+def _sw_slide(S: _Switching, ix, s: int) -> None:
+    """Stick: ends the step stuck, or starts slipping where |kt (u_t - w)| reaches L."""
+    end = np.abs(S.kt[ix] * (S.u1[ix] - S.w[ix])) > S.L1[ix]
+    peak, tpk = _stick_peak(S.ct[ix], S.Lc[ix], S.kt[ix], S.w[ix], S.t[ix])
+    over = end | peak
+    S.run[ix[~over]] = False
+    ix, tpk, peak = ix[over], tpk[over], peak[over]
+    if not ix.size:
+        return
+    ct, Lc, kt = S.rows(ix)
+    w, t0 = S.w[ix], S.t[ix]
+    # the first excursion: up to the largest excess inside the step if there is one, else the end
+    thi = np.where(peak, tpk, 1.0)
+    f0 = _excess(ct, Lc, kt, w, t0)
+    # already outside at the phase start? (a phase that starts on the limit, after a closing or
+    # a stop, has f0 = 0 up to rounding)
+    at = f0 > EDGE_TOL * S.L1[ix]
+    ts = t0.copy()
+    r = np.nonzero(~at)[0]
+    if r.size:
+        cr, lr, kr = tuple(c[r] for c in ct), tuple(c[r] for c in Lc), kt[r]
+        ts[r] = _root_vector(_excess_fun(cr, lr, kr, w[r]), t0[r], thi[r],
+                             np.minimum(f0[r], 0.0), np.maximum(_excess(cr, lr, kr, w[r], thi[r]), 0.0))
+    d = _poly(ct, ts) - w
+    ad = np.abs(d)
+    z = d / ad
+    P, Q = S.P[ix], S.Q[ix]                        # dz = -(dw - z^2 conj dw) / (2 |d|)
+    S.P[ix], S.Q[ix] = -(P - z * z * Q.conj()) / (2.0 * ad), -(Q - z * z * P.conj()) / (2.0 * ad)
+    S.z[ix] = z
+    S.slipped[ix] = True
+    S.switch(ix, s, M_SLIP, ts, np.where(at, SW_STICK_SLIP_AT, SW_STICK_SLIP))
+
+
+def _sw_stop(S: _Switching, ix, s: int) -> None:
+    """Slip: ends the step slipping, or sticks where the slip rate vanishes."""
+    ct, Lc, kt = S.rows(ix)
+    z, t0 = S.z[ix], S.t[ix]
+    z1, K1 = _magnus_k(ct, Lc, kt, z, t0, 1.0)
+    rate1 = _slip_rate(ct, Lc, kt, z1, 1.0)
+    keep = rate1 > 0
+    f = -(S.L1[ix] / kt)
+    S.w[ix[keep]] = (S.u1[ix] + f * z1)[keep]
+    S.scale(ix[keep], (f * K1)[keep])
+    S.run[ix[keep]] = False
+    r = np.nonzero(~keep)[0]
+    if not r.size:
+        return
+    ix, ct, Lc, kt = ix[r], tuple(c[r] for c in ct), tuple(c[r] for c in Lc), kt[r]
+    z, t0, rate1, z1 = z[r], t0[r], rate1[r], z1[r]
+    rate0 = _slip_rate(ct, Lc, kt, z, t0)
+    at = rate0 <= 0                               # stops at the phase start
+    tr = t0.copy()
+    q = np.nonzero(~at)[0]
+    if q.size:
+        cq, lq, kq, tq = tuple(c[q] for c in ct), tuple(c[q] for c in Lc), kt[q], t0[q]
+        h = _stop_quadratic(cq, lq, kq, z[q], tq, z1[q], rate0[q], rate1[q])
+        tr[q] = _root_vector(_stop_fun(h, tq), tq, np.ones(q.size), -rate0[q], -rate1[q])
+    zr, Kr = _magnus_k(ct, Lc, kt, z, t0, tr)
+    S.z[ix] = zr
+    L = _poly(Lc, tr)
+    S.w[ix] = _poly(ct, tr) - L * zr / kt
+    S.scale(ix, -(L / kt) * Kr)
+    S.switch(ix, s, M_STICK, tr, np.where(at, SW_SLIP_STICK_AT, SW_SLIP_STICK))
+
+
+def _events_vector(ct, Nc, Lc, kt, w, mode, tlo, u1, L1):
+    """Steps with switches inside the interval, vectorized over them.
+
+    Args:
+        ct, Nc, Lc: (b, 4) cubic coefficients of u_t (complex, mm), n0 + kn (u_n - g) and L, N.
+        kt: (b,) N/mm. w: (b,) complex slider at the start, mm. mode: (b,) M_STICK / M_SLIP /
+        M_OPEN at the start. tlo: (b,) where a closing is searched from. u1, L1: (b,) u_t and
+        L at the end sample.
+
+    Returns:
+        w (b,) at the end, slipped (b,) bool, switch codes (b, MAX_SWITCH), times
+        (b, MAX_SWITCH), and (P, Q) (b,) with d w = P d w0 + Q conj(d w0) (see _Record).
+    """
+    S = _Switching(ct, Nc, Lc, kt, w, mode, tlo, u1, L1)
+    for s in range(MAX_SWITCH):
+        moved = ~S.run
+        for m, fn in ((M_OPEN, _sw_close), (M_STICK, _sw_slide), (M_SLIP, _sw_stop)):
+            ix = np.nonzero(~moved & (S.mode == m))[0]
+            if ix.size:
+                fn(S, ix, s)
+                moved[ix] = True
+        if not S.run.any():
+            break
+    ix = np.nonzero(S.run & (S.mode == M_SLIP))[0]      # switch budget spent while slipping
+    if ix.size:
+        ct_, Lc_, kt_ = S.rows(ix)
+        z1, K1 = _magnus_k(ct_, Lc_, kt_, S.z[ix], S.t[ix], 1.0)
+        S.w[ix] = S.u1[ix] - (S.L1[ix] / kt_) * z1
+        S.scale(ix, -(S.L1[ix] / kt_) * K1)
+    return S.w, S.slipped, S.codes, S.taus, S.P, S.Q
+
+
+def _event_scalar(ct, Nc, Lc, kt, w, mode, tlo, u1, L1):
+    """_events_vector for one step of one element on Python scalars (same decisions)."""
+    t, z, slipped, p, q = 0.0, 0j, mode == M_SLIP, 0j, 0j
+    if mode == M_STICK:
+        p = 1.0 + 0j
+    elif slipped:
+        T0 = kt * (ct[0] - w)
+        r0 = abs(T0)
+        z = T0 / r0
+        p = -kt / (2.0 * r0) + 0j
+        q = -p * z * z
+    codes, taus = [], []
+    while len(codes) < MAX_SWITCH:
+        if mode == M_OPEN:
+            t = _root_scalar(_close_fun(Nc), tlo, 1.0, _poly(Nc, tlo), _poly(Nc, 1.0))
+            pd = _dpoly(ct, t)
+            p = q = 0j
+            if kt * abs(pd) > _dpoly(Lc, t):
+                mode, z, code, slipped = M_SLIP, pd / abs(pd), SW_OPEN_SLIP, True
+            else:
+                mode, w, code = M_STICK, _poly(ct, t), SW_OPEN_STICK
+        elif mode == M_STICK:
+            peak, tpk = _stick_over_scalar(ct, Lc, kt, w, t)
+            thi = tpk if peak else 1.0
+            if abs(kt * (u1 - w)) <= L1 and not peak:
+                return w, slipped, codes, taus, p, q
+            f0 = _excess(ct, Lc, kt, w, t)
+            code = SW_STICK_SLIP_AT if f0 > EDGE_TOL * L1 else SW_STICK_SLIP
+            if code == SW_STICK_SLIP:
+                t = _root_scalar(_excess_fun(ct, Lc, kt, w), t, thi, min(f0, 0.0),
+                                 max(_excess(ct, Lc, kt, w, thi), 0.0))
+            d = _poly(ct, t) - w
+            ad = abs(d)
+            mode, z, slipped = M_SLIP, d / ad, True
+            p, q = -(p - z * z * q.conjugate()) / (2.0 * ad), -(q - z * z * p.conjugate()) / (2.0 * ad)
+        else:
+            z1, K1 = _magnus_k(ct, Lc, kt, z, t, 1.0)
+            rate1 = _slip_rate(ct, Lc, kt, z1, 1.0)
+            if rate1 > 0:
+                f = -(L1 / kt) * K1
+                return u1 - (L1 / kt) * z1, slipped, codes, taus, f * p, f * q
+            rate0 = _slip_rate(ct, Lc, kt, z, t)
+            code = SW_SLIP_STICK_AT if rate0 <= 0 else SW_SLIP_STICK
+            if rate0 > 0:
+                h = _stop_quadratic(ct, Lc, kt, z, t, z1, rate0, rate1)
+                tr = _root_scalar(_stop_fun(h, t), t, 1.0, -rate0, -rate1)
+                z, K = _magnus_k(ct, Lc, kt, z, t, tr)
+                t, p, q = tr, K * p, K * q
+            L = _poly(Lc, t)
+            mode, w, p, q = M_STICK, _poly(ct, t) - L * z / kt, -(L / kt) * p, -(L / kt) * q
+        codes.append(code)
+        taus.append(t)
+    if mode == M_SLIP:
+        z1, K1 = _magnus_k(ct, Lc, kt, z, t, 1.0)
+        w, f = u1 - (L1 / kt) * z1, -(L1 / kt) * K1
+        p, q = f * p, f * q
+    return w, slipped, codes, taus, p, q
+
+
+# ---------------------------------------------------------------------------- excursions of a stick phase
+#: (i, j, k) = [i + j == k]: power coefficients of a product of two cubics
+_CONV = np.array([[[float(i + j == k) for k in range(7)] for j in range(4)] for i in range(4)])
+#: Bernstein coefficients on [0, 1] of a degree-6 polynomial from its power coefficients
+_BERN = np.array([[math.comb(k, i) / math.comb(6, i) if i <= k else 0.0 for i in range(7)]
+                  for k in range(7)])
+_BERN_L = _BERN.tolist()
+
+
+def _excess_sq(ct, Lc, kt, w):
+    """Power coefficients (..., 7) of kt^2 |u_t - w|^2 - L^2 along the step (ct (..., 4) complex,
+    Lc (..., 4)): > 0 exactly where the stuck force is outside the limit (L >= 0)."""
+    d = np.array(ct, dtype=complex)
+    d[..., 0] -= w
+    M = (kt ** 2)[..., None, None] * (d[..., :, None] * d[..., None, :].conj()).real
+    M -= Lc[..., :, None] * Lc[..., None, :]
+    return np.einsum("...ij,ijk->...k", M, _CONV)
+
+
+def _horner(a, t):
+    """sum_k a[:, k] t^k (a (b, n) with t (b,), or a (b, n, 1) with t (b, m))."""
+    v = a[:, -1]
+    for k in range(a.shape[1] - 2, -1, -1):
+        v = v * t + a[:, k]
+    return v
+
+
+def _stick_clear(ct, Lc, kt, w):
+    """True where the stuck force certainly stays inside the limit over the whole step (all
+    Bernstein coefficients of _excess_sq <= 0; conservative)."""
+    return (_excess_sq(ct, Lc, kt, w) @ _BERN.T).max(axis=-1) <= 0.0
+
+
+def _stick_peak(ct, Lc, kt, w, t0):
+    """Largest excess of a stick phase from t0 to the step end (arrays over steps, ct (b, 4)).
+
+    The samples only bound a step: the stuck force can leave the limit between them and be back
+    inside at the end. Testing the end sample alone then misses that slip, and the missed slip
+    makes the force jump where the end sample crosses the limit (or, in a periodic state whose
+    end sample lies on the limit, flip by rounding between two periodic states). The largest
+    excess is located on a grid, refined by Newton on the polynomial _excess_sq.
+
+    Returns:
+        over (b,) the excess exceeds PEAK_TOL max(L, L(1)) somewhere in (t0, 1], tpk (b,) where it is
+        largest (the bracket end of the stick -> slip root).
+    """
+    a = _excess_sq(ct, Lc, kt, w)                                     # (b, 7)
+    s = np.linspace(0.0, 1.0, PEAK_GRID + 1)
+    tg = t0[:, None] + (1.0 - t0)[:, None] * s                          # (b, m)
+    G = _horner(a[:, :, None], tg)
+    m = np.argmax(G, axis=1)
+    r = np.arange(m.size)
+    t = tg[r, m]
+    lo, hi = tg[r, np.maximum(m - 1, 0)], tg[r, np.minimum(m + 1, PEAK_GRID)]
+    a1 = a[:, 1:] * np.arange(1, 7)
+    a2 = a1[:, 1:] * np.arange(1, 6)
+    for _ in range(8):
+        g2 = _horner(a2, t)
+        step = np.divide(_horner(a1, t), g2, out=np.zeros_like(t), where=g2 < 0.0)
+        tn = np.clip(t - step, lo, hi)
+        if np.all(np.abs(tn - t) <= ROOT_TOL):
+            t = tn
+            break
+        t = tn
+    t = np.where(_horner(a, t) > G[r, m], t, tg[r, m])
+    c, l = tuple(np.moveaxis(np.asarray(ct), -1, 0)), tuple(np.moveaxis(np.asarray(Lc), -1, 0))
+    L = _poly(l, t)
+    # (relative to the larger of the limit there and at the step end: right after a closing the
+    # limit vanishes, and rounding-level excesses near it are no excursion)
+    over = kt * np.abs(_poly(c, t) - w) - L > PEAK_TOL * np.maximum(np.maximum(L, _poly(l, 1.0)), 1e-300)
+    return over, t
+
+
+def _stick_over_scalar(ct, Lc, kt, w, t0=0.0):
+    """_stick_peak for one step on Python scalars: (over, tpk); (False, 1.0) when certainly clear."""
+    d = (ct[0] - w, ct[1], ct[2], ct[3])
+    # |kt (u_t - w)| <= kt sum |d_i| and L >= L_0 - sum |L_i| (i > 0) on [0, 1]: deep inside
+    if t0 == 0.0 and kt * (abs(d[0]) + abs(d[1]) + abs(d[2]) + abs(d[3])) <= (
+            Lc[0] - abs(Lc[1]) - abs(Lc[2]) - abs(Lc[3])):
+        return False, 1.0
+    k2 = kt * kt
+    a = [0.0] * 7
+    for i in range(4):
+        for j in range(4):
+            a[i + j] += k2 * (d[i] * d[j].conjugate()).real - Lc[i] * Lc[j]
+    if t0 == 0.0 and max(sum(_BERN_L[k][i] * a[i] for i in range(k + 1)) for k in range(7)) <= 0.0:
+        return False, 1.0
+    return _stick_peak_scalar(a, ct, Lc, kt, w, float(t0))
+
+
+def _hornerl(a, t: float) -> float:
+    """sum_k a[k] t^k for a list a (Python scalars)."""
+    v = a[-1]
+    for k in range(len(a) - 2, -1, -1):
+        v = v * t + a[k]
+    return v
+
+
+def _stick_peak_scalar(a, ct, Lc, kt: float, w: complex, t0: float):
+    """_stick_peak for one step on Python scalars, given the excess coefficients a (list of 7):
+    the same grid search and Newton refinement (a numpy call per step cost 10x more on the few
+    elements marched one by one). Returns (over, tpk)."""
+    G, tg = [], []
+    for i in range(PEAK_GRID + 1):
+        t = t0 + (1.0 - t0) * (i / PEAK_GRID)
+        tg.append(t)
+        G.append(_hornerl(a, t))
+    m = max(range(PEAK_GRID + 1), key=G.__getitem__)
+    t = tg[m]
+    lo, hi = tg[max(m - 1, 0)], tg[min(m + 1, PEAK_GRID)]
+    a1 = [a[k] * k for k in range(1, 7)]
+    a2 = [a1[k] * k for k in range(1, 6)]
+    for _ in range(8):
+        g2 = _hornerl(a2, t)
+        step = _hornerl(a1, t) / g2 if g2 < 0.0 else 0.0
+        tn = min(max(t - step, lo), hi)
+        if abs(tn - t) <= ROOT_TOL:
+            t = tn
+            break
+        t = tn
+    if not _hornerl(a, t) > G[m]:
+        t = tg[m]
+    L = _poly(Lc, t)
+    over = kt * abs(_poly(ct, t) - w) - L > PEAK_TOL * max(max(L, _poly(Lc, 1.0)), 1e-300)
+    return over, t
+
+
+# ---------------------------------------------------------------------------- one period
+def _cycle_vector(tab: _StepTables, rows: np.ndarray, w: np.ndarray) -> _Record:
+    """March one period of the elements rows of tab from their sliders w (complex, mm),
+    vectorized over the elements.
+
+    Each element has its own step pointer. A round advances every element through its current
+    stick, slip or open phase (_advance, up to WINDOW steps), then processes together the
+    steps with switches that the elements reached (_switch_steps). A period takes about as many
+    rounds as an element has phases: stepping all elements sample by sample, with one small
+    batch of switching steps per sample, cost most of the march in numpy call overhead.
+    """
+    k, nt = rows.size, tab.ut.shape[1]
+    rec = _Record(k, nt)
+    rec.cdone[:] = False
+    w = w.copy()
+    pos = np.zeros(k, dtype=int)
+    while True:
+        act = np.nonzero(pos < nt)[0]
+        if not act.size:
+            break
+        ev = _advance(tab, rows, rec, w, pos, act)
+        if ev.size:
+            _switch_steps(tab, rows, rec, w, pos, ev)
+    rec.wend = w
+    return rec
+
+
+def _cycle_matrix(tab: _StepTables, rows, rec: _Record) -> np.ndarray:
+    """(k, 2, 2) derivative of the end slider w.r.t. the start one for the records rec of the
+    elements rows of tab (see _Record.cP): from the steps' (AP, AQ) (switching steps: recorded by
+    _switch_steps; full-step slips: dw_j = (L_j / (2 |T0|)) K (dw - z0^2 conj dw), K the Möbius
+    derivative), unless the march accumulated it."""
+    todo = np.nonzero(~rec.cdone)[0]
+    if todo.size:
+        code = rec.code[todo]
+        P = np.where(code == STICK_STEP, 1.0 + 0j, np.where(code == EVENT_STEP, rec.AP[todo], 0j))
+        Q = np.where(code == EVENT_STEP, rec.AQ[todo], 0j)
+        e, j = np.nonzero(code == SLIP_STEP)
+        g = rows[todo][e]
+        T0 = tab.kt[g] * (tab.ut[g, j - 1] - rec.wst[todo[e], j])
+        r0 = np.abs(T0)
+        z0 = T0 / r0
+        K = tab.det[g, j] / (tab.be[g, j].conj() * z0 + tab.al[g, j].conj()) ** 2
+        P[e, j] = tab.L[g, j] / (2.0 * r0) * K
+        Q[e, j] = -P[e, j] * z0 * z0
+        rec.cP[todo], rec.cQ[todo] = _compose(P, Q)
+        rec.cdone[todo] = True
+    return _to_real(rec.cP, rec.cQ)
+
+
+def _mobius_scan(al, be):
+    """Inclusive prefix products along axis 1 of the Möbius matrices [[al, be], [conj be,
+    conj al]], later steps on the left (Hillis–Steele)."""
+    a, b = al.copy(), be.copy()
+    s = 1
+    while s < a.shape[1]:
+        a1, b1, a2, b2 = a[:, s:], b[:, s:], a[:, :-s], b[:, :-s]
+        a[:, s:], b[:, s:] = a1 * a2 + b1 * b2.conj(), a1 * b2 + b1 * a2.conj()
+        s *= 2
+    return a, b
+
+
+def _compose(P, Q):
+    """Composition along axis 1 (later on the left) of the maps dv -> P dv + Q conj(dv)."""
+    while P.shape[1] > 1:
+        if P.shape[1] % 2:
+            P = np.concatenate([P, np.ones_like(P[:, :1])], axis=1)
+            Q = np.concatenate([Q, np.zeros_like(Q[:, :1])], axis=1)
+        P1, Q1, P2, Q2 = P[:, 0::2], Q[:, 0::2], P[:, 1::2], Q[:, 1::2]
+        P, Q = P2 * P1 + Q2 * Q1.conj(), P2 * Q1 + Q2 * P1.conj()
+    return P[:, 0], Q[:, 0]
+
+
+def _advance(tab: _StepTables, rows, rec: _Record, w, pos, act):
+    """Advance the elements act (indices into rows, w, pos, rec; tab row rows[act]), each from its
+    own step pos, through their current stick, slip or open phase (at most WINDOW steps; an
+    opening step ends a phase and is done). w, pos and rec are updated in place. Returns the
+    elements that stopped at a step with switches."""
+    nt = tab.ut.shape[1]
+    g = rows[act]
+    J = pos[act, None] + _WIN
+    inside = J < nt
+    u1, al, be, pe, lim, fl = np.moveaxis(tab.packed()[g[:, None], np.minimum(J, nt - 1)], -1, 0)
+    L1, flags = lim.real, fl.real.astype(np.int8)
+    c1, ok = (flags & 2) > 0, (flags & 5) == 1                  # ok: closed before, not bad
+    kt, wa, p0 = tab.kt[g], w[act], pos[act] - 1
+    T0 = kt * (tab.ut[g, p0] - wa)
+    r0 = np.abs(T0)
+    closed0 = (flags[:, 0] & 1) > 0
+    slip0 = closed0 & (r0 >= tab.L[g, p0] * (1.0 - SLIP_TOL))
+    stick0 = closed0 & ~slip0
+    cont = np.where(stick0[:, None], ok & c1 & (np.abs(kt[:, None] * (u1 - wa[:, None])) <= L1), ~c1)
+    # stick steps that end inside the limit may still leave it between the samples
+    cs = np.nonzero(stick0[:, None] & cont)
+    if cs[0].size:
+        Jc = np.minimum(J[cs], nt - 1)
+        ctc, Lcc, ktc, wc = tab.ct[g[cs[0]], Jc], tab.Lc[g[cs[0]], Jc], kt[cs[0]], wa[cs[0]]
+        q = np.nonzero(~_stick_clear(ctc, Lcc, ktc, wc))[0]
+        if q.size:
+            over, _ = _stick_peak(ctc[q], Lcc[q], ktc[q], wc[q], np.zeros(q.size))
+            cont[cs[0][q[over]], cs[1][q[over]]] = False
+    w_after = np.where(stick0[:, None] & c1, wa[:, None], u1)
+    s = np.nonzero(slip0)[0]
+    if s.size:
+        z0 = T0[s] / r0[s]
+        A_, B_ = _mobius_scan(al[s], be[s])
+        # (deep slip makes a step's matrix rank one in floating point, and a product of two can
+        # vanish across a reversal: the NaN then fails the slip test and the step switches)
+        ks = kt[s, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = (A_ * z0[:, None] + B_) / (B_.conj() * z0[:, None] + A_.conj())
+            cont[s] = ok[s] & c1[s] & (ks * (z.conj() * pe[s]).real > lim[s].imag)
+            w_after[s] = np.where(c1[s], u1[s] - (L1[s] / ks) * z, u1[s])
+    cont &= inside
+    n = np.where(cont.all(axis=1), WINDOW, np.argmin(cont, axis=1))
+    rows, nb = np.arange(act.size), np.minimum(n, WINDOW - 1)
+    brk = (n < WINDOW) & inside[rows, nb]
+    opening = brk & closed0 & ~c1[rows, nb]
+    stop = brk & ~opening
+    m = n + opening                                                    # steps done this round
+    done = _WIN < m[:, None]
+    code = np.where(c1, np.where(slip0, SLIP_STEP, np.where(stick0, STICK_STEP, OPEN_STEP))[:, None],
+                    OPEN_STEP)
+    e, j = np.broadcast_to(act[:, None], J.shape)[done], J[done]
+    rec.wst[e, j] = np.concatenate([wa[:, None], w_after[:, :-1]], axis=1)[done]
+    rec.code[e, j] = code[done]
+    rec.slip[e, j] = rec.code[e, j] == SLIP_STEP
+    w[act] = np.where(m > 0, w_after[rows, np.maximum(m - 1, 0)], wa)
+    pos[act] += m
+    ev = act[stop]
+    rec.mode0[ev, pos[ev]] = np.where(ok[rows, nb][stop], np.where(slip0[stop], M_SLIP, M_STICK), M_OPEN)
+    return ev
+
+
+def _switch_steps(tab: _StepTables, rows, rec: _Record, w, pos, ev) -> None:
+    """Do the steps with switches at which the elements ev stopped (pos[ev]), as one batch."""
+    j, g = pos[ev], rows[ev]
+    w1, sl, codes, taus, P, Q = _events_vector(tab.ct[g, j], tab.Nc[g, j], tab.Lc[g, j], tab.kt[g],
+                                               w[ev], rec.mode0[ev, j], tab.tlo[g, j], tab.ut[g, j],
+                                               tab.L[g, j])
+    rec.wst[ev, j], rec.code[ev, j], rec.slip[ev, j] = w[ev], EVENT_STEP, sl
+    rec.evc[ev, j], rec.evt[ev, j], rec.AP[ev, j], rec.AQ[ev, j] = codes, taus, P, Q
+    w[ev] = w1
+    pos[ev] += 1
+
+
+
+
+
+def _give_up_if_slow(st: SimpleNamespace, rows: np.ndarray, cycle: int, max_cycles: int) -> None:
+    """Raise ConvergenceError as soon as plain repetition is predicted not to close the elements
+    rows within max_cycles.
+
+    Plain repetition contracts geometrically (w_n - w* ~ rho^n), so after a few cycles the ratio
+    of successive closure errors predicts the cycles still needed. Marching on until the budget
+    is spent (1000 periods on the resonator, most of an evaluation's time with the 4th-order
+    march) ends in the same ConvergenceError; the caller then keeps the Newton-closed state.
+    """
+    if cycle < GIVE_UP_AFTER or not rows.size:
+        return
+    dev, prev = st.dev[rows], st.prev[rows]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = np.where(prev > 0.0, dev / prev, 1.0)
+        need = np.where(rho < 1.0, np.log(st.close_tol / np.maximum(dev, 1e-300))
+                        / np.log(np.where(rho < 1.0, rho, 0.5)), np.inf)
+    if np.any(cycle + need > GIVE_UP_MARGIN * max_cycles):
+        raise ConvergenceError(f"friction cycle predicted not to close in {max_cycles} periods "
+                               f"(contraction {rho.max():.6f} per period)", float(dev.max()))
+
+
+def _cycle_scalar(tl: SimpleNamespace, w: complex) -> _Record:
+    """_cycle_vector for one element on Python scalars (tl from _StepTables.scalars)."""
+    rec = _Record(1, len(tl.ut))
+    rec.cdone[:] = False
+    rec.wend[0] = _steps_scalar(tl, w, rec)
+    return rec
+
+
+def _steps_scalar(tl: SimpleNamespace, w: complex, rec: _Record) -> complex:
+    """March one element over a period on Python scalars, recording into rec (one row).
+    Returns the end slider."""
+    nt = len(tl.ut)
+    kt, ut, tcl, L = tl.kt, tl.ut, tl.tcl, tl.L
+    code, wst, slip, evs = [STICK_STEP] * nt, [0j] * nt, [False] * nt, []
+    for j in range(nt):
+        wst[j] = w
+        if not tcl[j]:
+            code[j], w = OPEN_STEP, ut[j]
+            continue
+        if tcl[j - 1] and not tl.bad[j]:
+            T0 = kt * (ut[j - 1] - w)
+            r0 = abs(T0)
+            if r0 >= L[j - 1] * (1.0 - SLIP_TOL):
+                z0, a, b = T0 / r0, tl.al[j], tl.be[j]
+                z1 = (a * z0 + b) / (b.conjugate() * z0 + a.conjugate())
+                if kt * (z1.conjugate() * tl.pe[j]).real > tl.Lpe[j]:
+                    code[j], slip[j], w = SLIP_STEP, True, ut[j] - (L[j] / kt) * z1
+                    continue
+                mode = M_SLIP
+            elif abs(kt * (ut[j] - w)) <= L[j] and not _stick_over_scalar(tl.ct[j], tl.Lc[j], kt, w)[0]:
+                continue
+            else:
+                mode = M_STICK
+        else:
+            mode = M_OPEN
+        code[j] = EVENT_STEP
+        w, slip[j], codes, taus, p, q = _event_scalar(tl.ct[j], tl.Nc[j], tl.Lc[j], kt, w, mode,
+                                                      tl.tlo[j], ut[j], L[j])
+        evs.append((j, mode, codes, taus, p, q))
+    rec.code[0], rec.wst[0], rec.slip[0] = code, wst, slip
+    for j, mode, codes, taus, p, q in evs:
+        rec.mode0[0, j], rec.AP[0, j], rec.AQ[0, j] = mode, p, q
+        rec.evc[0, j, :len(codes)], rec.evt[0, j, :len(taus)] = codes, taus
     return w
 
 
-#: up to this many marched elements the Jacobian recurrence uses a prefix scan
-SCAN_LIMIT = 16
+# ---------------------------------------------------------------------------- step derivatives
+def _to_real(P, Q):
+    """Real 2x2 blocks (b, 2, 2) of the R-linear maps dv -> P dv + Q conj(dv)."""
+    c0, c1 = P + Q, 1j * (P - Q)
+    return np.stack([np.stack([c0.real, c1.real], -1), np.stack([c0.imag, c1.imag], -1)], -2)
+
+
+def _slip_jacobians(tab: _StepTables, rec: _Record, e, j):
+    """Exact derivatives of full-step slips (most steps, so hand-coded rather than replayed).
+
+    With z1 = (al z0 + be) / D, D = conj(be) z0 + conj(al):
+    dz1 = det/D^2 dz0 + [dal z0 + dbe - z1 (conj(dbe) z0 + conj(dal))] / D, and (al, be) follow
+    from (A, gam) of _mobius_a, themselves from the Gauss-point rates a_g = kt p'_g / (2 L_g).
+
+    Returns:
+        A (b, 2, 2) = d w_j / d w_{j-1} and G (b, 2, 3, 4) = d w_j / d(u_t1, u_t2, u_n of the
+        stencil samples j-2..j+1), w as (Re, Im).
+    """
+    kt, mukn = tab.kt[e], tab.mu[e] * tab.kn[e]
+    Lg = tab.Lg[e, j]
+    a = (0.5 * kt)[:, None] * tab.pg[e, j] / Lg                       # (b, 2)
+    a1, a2 = a[:, 0], a[:, 1]
+    A = 0.5 * (a1 + a2)
+    gam = _S6 * (a2 * a1.conj()).imag
+    c, s, dc, ds = _cs_array((A * A.conj()).real - gam * gam, True)
+    al, be = c + 1j * s * gam, s * A
+    T0 = kt * (tab.ut[e, j - 1] - rec.wst[e, j])
+    r0 = np.abs(T0)
+    z0 = T0 / r0
+    D = be.conj() * z0 + al.conj()
+    z1 = (al * z0 + be) / D
+    K0 = ((al * al.conj()).real - (be * be.conj()).real) / D ** 2
+    ax = dc + 1j * ds * gam                                            # d al / dx, d be / dx
+    Kx = (ax * z0 + ds * A - z1 * z0 * ds * A.conj() - z1 * ax.conj()) / D
+    PA = s / D + Kx * A.conj()                                         # dz1 = PA dA + QA conj(dA)
+    QA = -z1 * z0 * s / D + Kx * A
+    h = (0.5j * _S6) * (1j * s * (z0 + z1) / D - 2.0 * gam * Kx)       # (i sqrt3/12) dz1/dgam
+    P = np.stack([0.5 * PA + h * a2.conj(), 0.5 * PA - h * a1.conj()], 1)   # coefficient of da_g
+    Q = np.stack([0.5 * QA - h * a2, 0.5 * QA + h * a1], 1)                 # of conj(da_g)
+    ka = (0.5 * kt)[:, None] / Lg                                      # da_g / dp'_g
+    Pu, Qu = (P * ka) @ _DLG, (Q * ka) @ _DLG                          # (b, 4) per sample
+    Rn = (-(P * a + Q * a.conj()) / Lg) @ _LG * mukn[:, None]
+    Pw, Qw = -kt * K0 / (2.0 * r0), kt * K0 * z0 ** 2 / (2.0 * r0)     # through z0 = T0/|T0|
+    Pu[:, 1] -= Pw
+    Qu[:, 1] -= Qw
+    f = (-tab.L[e, j] / kt)[:, None]                                   # w_j = u_j - L_j z1 / kt
+    Pu, Qu, Rn = f * Pu, f * Qu, f * Rn
+    Pu[:, 2] += 1.0
+    Rn[:, 2] -= z1 * mukn / kt
+    G = np.empty((e.size, 2, 3, 4))
+    blk = _to_real(Pu, Qu)                                             # (b, 4, 2, 2)
+    G[:, :, 0:2] = blk.transpose(0, 2, 3, 1)
+    G[:, 0, 2], G[:, 1, 2] = Rn.real, Rn.imag
+    return _to_real(f[:, 0] * Pw, f[:, 0] * Qw), G
+
+
+def _implicit(fun, tau: np.ndarray) -> _Dual:
+    """Switch time as a _Dual: tau solves fun(tau; inputs) = 0, so dtau = -f_x / f_tau (the last
+    derivative slot is tau's own)."""
+    d = np.zeros((tau.size, NSLOT))
+    d[:, -1] = 1.0
+    fd = np.real(fun(_Dual(tau, d)).d)
+    ft = fd[:, -1:]
+    out = np.zeros_like(fd)
+    out[:, :-1] = -fd[:, :-1] / np.where(ft != 0, ft, np.inf)
+    return _Dual(tau, out)
+
+
+def _replay(mode0: int, codes, taus, ct, Nc, Lc, kt, w, u1, L1):
+    """The slider at the end of switching steps as a _Dual, following the recorded switches
+    (same formulas as _event_scalar / _events_vector; the branch decisions are not retaken)."""
+    t, z, mode = 0.0, None, mode0
+    if mode0 == M_SLIP:
+        T0 = kt * (ct[0] - w)
+        z = T0 / abs(T0)
+    for s, code in enumerate(codes):
+        tau = taus[:, s]
+        if code in (SW_OPEN_STICK, SW_OPEN_SLIP):
+            t = _implicit(lambda x: _poly(Nc, x), tau)
+            if code == SW_OPEN_STICK:
+                w, mode = _poly(ct, t), M_STICK
+            else:
+                pd = _dpoly(ct, t)
+                z, mode = pd / abs(pd), M_SLIP
+        elif code in (SW_STICK_SLIP, SW_STICK_SLIP_AT):
+            if code == SW_STICK_SLIP:
+                t = _implicit(lambda x: _excess(ct, Lc, kt, w, x), tau)
+            d = _poly(ct, t) - w
+            z, mode = d / abs(d), M_SLIP
+        else:
+            if code == SW_SLIP_STICK:
+                z1 = _magnus(ct, Lc, kt, z, t, 1.0)
+                h = _stop_quadratic(ct, Lc, kt, z, t, z1, _slip_rate(ct, Lc, kt, z, t),
+                                    _slip_rate(ct, Lc, kt, z1, 1.0))
+                ta, za = t, z
+                t = _implicit(lambda x: _poly(h, (x - ta) / (1.0 - ta)), tau)
+                z = _magnus(ct, Lc, kt, za, ta, t)
+            w, mode = _poly(ct, t) - _poly(Lc, t) * z / kt, M_STICK
+    if mode == M_STICK:
+        return w
+    return u1 - L1 * _magnus(ct, Lc, kt, z, t, 1.0) / kt
+
+
+def _seeds(tab: _StepTables, rec: _Record, e, j):
+    """Inputs of steps (e, j) as _Dual: slider, cubic coefficients, end sample and limit. Slots:
+    Re w, Im w, u_t1, u_t2, u_n of the 4 stencil samples, and tau last."""
+    b = e.size
+    kn, mu = tab.kn[e], tab.mu[e]
+
+    def dual(v, slots=()):
+        d = np.zeros((b, NSLOT), dtype=complex)
+        for sl, val in slots:
+            d[:, sl] = val
+        return _Dual(v, d)
+    w = dual(rec.wst[e, j], [(0, 1.0), (1, 1j)])
+    ct = tuple(dual(tab.ct[e, j, i], [(slice(2, 6), _VINV[i]), (slice(6, 10), 1j * _VINV[i])])
+               for i in range(4))
+    Nc = tuple(dual(tab.Nc[e, j, i], [(slice(10, 14), kn[:, None] * _VINV[i])]) for i in range(4))
+    u1 = dual(tab.ut[e, j], [(4, 1.0), (8, 1j)])
+    L1 = dual(tab.L[e, j], [(12, mu * kn)])
+    return w, ct, Nc, tuple(mu * c for c in Nc), u1, L1
+
+
+def _event_jacobians(tab: _StepTables, rec: _Record, e, j):
+    """Exact derivatives of switching steps by forward-mode replay, grouped by switch sequence.
+
+    Returns A (b, 2, 2) and G (b, 2, 3, 4) as _slip_jacobians.
+    """
+    b = e.size
+    A, G = np.empty((b, 2, 2)), np.empty((b, 2, 3, 4))
+    sig = np.concatenate([rec.mode0[e, j, None], rec.evc[e, j]], axis=1)
+    keys, group = np.unique(sig, axis=0, return_inverse=True)
+    for g, key in enumerate(keys):
+        q = np.nonzero(group.ravel() == g)[0]
+        eq, jq = e[q], j[q]
+        w, ct, Nc, Lc, u1, L1 = _seeds(tab, rec, eq, jq)
+        codes = [int(c) for c in key[1:] if c]
+        d = _replay(int(key[0]), codes, rec.evt[eq, jq], ct, Nc, Lc, tab.kt[eq], w, u1, L1).d
+        A[q] = np.stack([np.stack([d[:, 0].real, d[:, 1].real], -1),
+                         np.stack([d[:, 0].imag, d[:, 1].imag], -1)], -2)
+        G[q, 0] = d[:, 2:14].real.reshape(-1, 3, 4)
+        G[q, 1] = d[:, 2:14].imag.reshape(-1, 3, 4)
+    return A, G
+
+
+
+
+
+def _local_jacobians(tab: _StepTables, rec: _Record):
+    """d w_j / d w_{j-1} (k, nt, 2, 2) and d w_j / d(stencil samples) (k, nt, 2, 3, 4) of every
+    step of a recorded period (stick: I, 0; open: 0, w_j = u_j)."""
+    k, nt = rec.code.shape
+    A, G = np.zeros((k, nt, 2, 2)), np.zeros((k, nt, 2, 3, 4))
+    A[rec.code == STICK_STEP] = np.eye(2)
+    op = rec.code == OPEN_STEP
+    G[op, 0, 0, 2] = 1.0
+    G[op, 1, 1, 2] = 1.0
+    for code, fn in ((SLIP_STEP, _slip_jacobians), (EVENT_STEP, _event_jacobians)):
+        e, j = np.nonzero(rec.code == code)
+        if e.size:
+            A[e, j], G[e, j] = fn(tab, rec, e, j)
+    return A, G
+
+
+
+
+
+def _newton_restart(w_start, w_end, P):
+    """Next cycle's start slider: Newton step on w = Phi(w) (slope P of the cycle map), which
+    closes 2D stick-slip cycles in a few periods instead of the slow geometric convergence of
+    plain repetition. Neutral elements (det(I - P) ~ 0, e.g. sticking all the closing cycle) keep
+    the plain repetition, i.e. their history from rest."""
+    M = np.eye(2) - P
+    det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
+    ok = np.abs(det) > NEWTON_DET
+    w = w_end.copy()
+    if ok.any():
+        d = w_end[ok] - w_start[ok]
+        x = np.linalg.solve(M[ok], np.stack([d.real, d.imag], -1)[:, :, None])[:, :, 0]
+        w[ok] = w_start[ok] + x[:, 0] + 1j * x[:, 1]
+    return w
 
 
 def _affine_scan(A, B):
@@ -104,6 +1235,7 @@ def _affine_scan(A, B):
     return P, D
 
 
+# ---------------------------------------------------------------------------- elements
 class FrictionContacts:
     """A set of 3D friction elements.
 
@@ -172,6 +1304,26 @@ class FrictionContacts:
         closed_all = np.all(N > 0.0, axis=1)
         T2 = self.kt[idx, None] ** 2 * (u[:, 0] ** 2 + u[:, 1] ** 2)
         stuck_all = closed_all & np.all(T2 <= (self.mu[idx, None] * N) ** 2, axis=1)
+        c = np.nonzero(stuck_all)[0]
+        if c.size:
+            # as the march would find from w = 0: no excursion outside the limit, and no opening,
+            # between the samples either (else the linear shortcut would jump where a sample
+            # crosses the limit)
+            nt = u.shape[2]
+            st = (np.arange(nt)[:, None] + _STENCIL) % nt
+            ut = u[c, 0] + 1j * u[c, 1]
+            ct = ut[:, st] @ _VINV.T
+            Nc = N[c][:, st] @ _VINV.T
+            ng = np.stack([_poly(tuple(np.moveaxis(Nc, -1, 0)), g) for g in _GAUSS], axis=-1)
+            Lc = self.mu[idx[c], None, None] * Nc
+            kt = np.broadcast_to(self.kt[idx[c], None], ut.shape)
+            ok = (ng > 0.0).all(axis=(1, 2)) | (self.mu[idx[c]] == 0.0)
+            clear = _stick_clear(ct, Lc, kt, np.zeros(ut.shape))
+            e, j = np.nonzero(~clear)
+            if e.size:
+                over, _ = _stick_peak(ct[e, j], Lc[e, j], kt[e, j], np.zeros(e.size), np.zeros(e.size))
+                ok[e[over]] = False
+            stuck_all[c[~ok]] = False
         return open_all, stuck_all
 
     # ------------------------------------------------------------------ time march
@@ -179,50 +1331,38 @@ class FrictionContacts:
               jacobian: bool = False, newton: bool = True, max_cycles: int | None = None):
         """March the elements ``idx`` over periods of the sampled motion until the cycle closes.
 
-        The forward pass only carries (k, 2) states. The Jacobian is obtained afterwards from the
-        recorded per-sample linearization, which is an affine recurrence for the slider
-        sensitivity, dw_{j+1} = A_j dw_j + S_j (x) E_j, with A_j = I (stick), rho (I - t t^T)
-        (slip, rho = mu N / |T*|, t = T*/|T*|) or 0 (open), and dT_j = Q_j (x) E_j - kt A_j dw_j.
+        The forward pass records what each step did (``_Record``). The Jacobian is obtained
+        afterwards from it: each step's derivative, d w_j = A_j d w_{j-1} + G_j (x) E_{stencil},
+        is an affine recurrence for the slider sensitivity, and dT_j = kt (E_j - d w_j).
 
         Args:
             u: relative displacement samples (k, 3, nt), mm.
             idx: element indices (k,).
             fourier: needed when jacobian=True.
             jacobian: also return d(force samples)/d(harmonics).
+            newton: close 2D cycles by Newton restarts on the slider (else plain repetition).
+            max_cycles: cycle budget (default ``self.max_cycles``).
 
         Returns:
-            T (k, 2, nt) tangential force N, N (k, nt) normal force N, slip (k, nt) bool,
-            closed (k, nt) bool, cycles marched, and when jacobian: dT (k, 2, nt, 3 nH),
+            T (k, 2, nt) tangential force N, N (k, nt) normal force N, slip (k, nt) bool
+            (slipped during the step ending at the sample), closed (k, nt) bool, cycles marched,
+            and when jacobian: dT (k, 2, nt, 3 nH),
             dN (k, nt, 3 nH) in the element's (direction, harmonic) layout.
         """
-        k, _, nt = u.shape
-        kt1 = self.kt[idx]
-        kt = kt1[:, None]
-        mu = self.mu[idx]
-        kn = self.kn[idx]
-        Nall = np.maximum(0.0, self.n0[idx, None] + kn[:, None] * (u[:, 2] - self.gap[idx, None]))
-        closed = Nall > 0.0
-        lim_all = mu[:, None] * Nall
-        T = np.zeros((k, 2, nt))
-        slip = np.zeros((k, nt), dtype=bool)
-        rho = np.zeros((k, nt))
-        that = np.zeros((k, nt, 2))
-        scale = np.maximum(lim_all.max(axis=1), 1e-300) / kt1          # slider length scale, mm
-        fwd = self._forward_scalar if k <= SCALAR_LIMIT else self._forward_vector
+        tab = _StepTables(u, self.kt[idx], self.mu[idx], self.kn[idx], self.n0[idx], self.gap[idx])
         n_cycles = self.max_cycles if max_cycles is None else int(max_cycles)
-        cycle, err, rec, jumped = fwd(u, kt1 if k <= SCALAR_LIMIT else kt, lim_all, closed, T, slip,
-                                      rho, that, scale, jacobian, newton, n_cycles)
+        final, hist, cyc, err, jumped = self._forward(tab, newton, n_cycles, jacobian)
         if err > self.close_tol:
             raise ConvergenceError(f"friction cycle did not close in {n_cycles} periods", err)
         # Elements that stick through the whole closing cycle have a neutral, history-dependent
         # slider; if a Newton restart touched their history, redo them by plain repetition from
         # rest so that state and Jacobian are those of the march from rest.
-        redo = np.zeros(k, dtype=bool)
-        if newton and jumped.any():
-            P = _cycle_matrix(closed, slip, rho, that)
-            Mf = np.eye(2) - P
-            det = Mf[:, 0, 0] * Mf[:, 1, 1] - Mf[:, 0, 1] * Mf[:, 1, 0]
-            redo = jumped & (np.abs(det) <= NEWTON_DET)
+        redo = np.zeros(len(idx), dtype=bool)
+        jr = np.nonzero(jumped)[0] if newton else np.zeros(0, dtype=int)
+        if jr.size:
+            M = np.eye(2) - _cycle_matrix(tab, jr, final.take(jr))
+            redo[jr] = np.abs(M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]) <= NEWTON_DET
+        T, slip, n_cyc = tab.force(final), final.slip, int(cyc.max())
         if redo.any():
             # Plain repetition contracts only geometrically: rates of 0.93 per cycle and, for an
             # element that barely slips at one sample, 1 − 1e-6 were seen on the resonator. These
@@ -236,222 +1376,69 @@ class FrictionContacts:
                 redo[:] = False
                 self.neutral_kept += 1
             else:
-                T[redo], Nall[redo], slip[redo] = sub[0], sub[1], sub[2]
-                cycle = max(cycle, sub[4])
-        out = [T, Nall, slip, closed, cycle]
+                T[redo], slip[redo] = sub[0], sub[2]
+                n_cyc = max(n_cyc, sub[4])
+        out = [T, tab.N, slip, tab.closed, n_cyc]
         if jacobian:
-            if k <= SCALAR_LIMIT:
-                # per element: its own number of cycles
-                nx = 3 * fourier.nH
-                dT, dN = np.empty((k, 2, nt, nx)), np.empty((k, nt, nx))
-                for e in range(k):
-                    sl_ = slice(e, e + 1)
-                    cyc = [(np.array([a]), np.array([b]), np.stack([c1, c2], axis=-1)[None])
-                           for a, b, c1, c2 in rec[e]]
-                    dT[sl_], dN[sl_] = self._march_jacobian(cyc, closed[sl_], kt1[sl_], kn[sl_],
-                                                            mu[sl_], fourier)
-                out += [dT, dN]
-            else:
-                out += list(self._march_jacobian(rec, closed, kt1, kn, mu, fourier))
+            out += list(_march_jacobian(tab, final, hist, cyc, fourier))
             if redo.any():
                 out[5][redo], out[6][redo] = sub[5], sub[6]
         return out
 
-    def _forward_vector(self, u, kt, lim_all, closed, T, slip, rho, that, scale, jacobian, newton,
-                        max_cycles):
-        """Forward march vectorized over elements (one numpy step per sample)."""
-        k, _, nt = u.shape
-        w = np.zeros((k, 2))
-        jumped = np.zeros(k, dtype=bool)
-        rec = []
-        ut_all = np.ascontiguousarray(u[:, 0:2].transpose(2, 0, 1))    # (nt, k, 2)
-        err = np.inf
-        for cycle in range(1, max_cycles + 1):
-            w_start = w.copy()
-            for j in range(nt):
-                ut = ut_all[j]
-                Ts = kt * (ut - w)
-                Tn = np.sqrt(Ts[:, 0] ** 2 + Ts[:, 1] ** 2)
-                lim = lim_all[:, j]
-                cj = closed[:, j]
-                sl = cj & (Tn > lim)
-                if sl.any():
-                    r = np.where(sl, lim / np.where(sl, Tn, 1.0), 1.0)
-                    rho[:, j] = np.where(sl, r, 0.0)
-                    that[:, j] = Ts / np.where(sl, Tn, 1.0)[:, None]
-                    Tj = Ts * (r * cj)[:, None]
-                else:
-                    rho[:, j] = 0.0
-                    Tj = Ts * cj[:, None]
-                T[:, :, j] = Tj
-                slip[:, j] = sl
-                stick = cj & ~sl
-                w = np.where(stick[:, None], w, ut - Tj / kt)
-            if jacobian:
-                rec.append((slip.copy(), rho.copy(), that.copy()))
-            dev = np.abs(w - w_start).max(axis=1) / scale
-            err = np.max(dev) if k else 0.0
-            if err <= self.close_tol:
-                break
-            if newton and cycle >= 2:
-                # (after the plain second cycle: 1D stick-slip and transients are closed by then)
-                act = dev > self.close_tol
-                P = np.broadcast_to(np.eye(2), (k, 2, 2)).copy()
-                P[act] = _cycle_matrix(closed[act], slip[act], rho[act], that[act])
-                w_new = _newton_restart(w_start, w, P, act)
-                jumped |= np.any(w_new != w, axis=1)
-                w = w_new
-        return cycle, err, rec, jumped
+    def _forward(self, tab: _StepTables, newton: bool, max_cycles: int, keep: bool):
+        """Forward march of all elements until each one's cycle closes.
 
-    def _forward_scalar(self, u, kt, lim_all, closed, T, slip, rho, that, scale, jacobian, newton,
-                        max_cycles):
-        """Forward march with Python floats, element by element (faster for a few elements)."""
-        k, _, nt = u.shape
-        rec = []
-        jumped = np.zeros(k, dtype=bool)
-        cyc_max, err_max = 1, 0.0
-        ul = u[:, 0:2].tolist()
-        liml, cl = lim_all.tolist(), closed.tolist()
-        for e in range(k):
-            k_e = float(kt[e])
-            u1, u2, lim_e, c_e = ul[e][0], ul[e][1], liml[e], cl[e]
-            w1 = w2 = 0.0
-            Tl1, Tl2 = [0.0] * nt, [0.0] * nt
-            sll, rl, t1l, t2l = [False] * nt, [0.0] * nt, [0.0] * nt, [0.0] * nt
-            recs = []
-            err = np.inf
-            for cycle in range(1, max_cycles + 1):
-                s1, s2 = w1, w2
-                p11, p12, p21, p22 = 1.0, 0.0, 0.0, 1.0        # cycle matrix (product of A_j)
-                for j in range(nt):
-                    a, b = u1[j], u2[j]
-                    if not c_e[j]:
-                        Tl1[j] = Tl2[j] = 0.0
-                        sll[j] = False
-                        rl[j] = 0.0
-                        w1, w2 = a, b
-                        p11 = p12 = p21 = p22 = 0.0
-                        continue
-                    x, y = k_e * (a - w1), k_e * (b - w2)
-                    tn = math.sqrt(x * x + y * y)
-                    lim = lim_e[j]
-                    if tn > lim:
-                        r = lim / tn
-                        sll[j] = True
-                        rl[j] = r
-                        e1, e2 = x / tn, y / tn
-                        t1l[j], t2l[j] = e1, e2
-                        # A_j = r (I - t t^T); P <- A_j P
-                        a11, a12, a22 = r * (1 - e1 * e1), -r * e1 * e2, r * (1 - e2 * e2)
-                        p11, p12, p21, p22 = (a11 * p11 + a12 * p21, a11 * p12 + a12 * p22,
-                                              a12 * p11 + a22 * p21, a12 * p12 + a22 * p22)
-                        x, y = x * r, y * r
-                        w1, w2 = a - x / k_e, b - y / k_e
-                    else:
-                        sll[j] = False
-                        rl[j] = 0.0
-                    Tl1[j], Tl2[j] = x, y
-                if jacobian:
-                    recs.append((list(sll), list(rl), list(t1l), list(t2l)))
-                err = max(abs(w1 - s1), abs(w2 - s2)) / scale[e]
-                if err <= self.close_tol:
-                    break
-                # Newton restart on the slider fixed point w = Phi(w), Phi' = P (see _newton_restart)
-                m11, m12, m21, m22 = 1 - p11, -p12, -p21, 1 - p22
-                det = m11 * m22 - m12 * m21
-                if newton and cycle >= 2 and abs(det) > NEWTON_DET:
-                    jumped[e] = True
-                    d1, d2 = w1 - s1, w2 - s2
-                    w1 = s1 + (m22 * d1 - m12 * d2) / det
-                    w2 = s2 + (-m21 * d1 + m11 * d2) / det
-            T[e, 0], T[e, 1] = Tl1, Tl2
-            slip[e], rho[e] = sll, rl
-            that[e, :, 0], that[e, :, 1] = t1l, t2l
-            cyc_max, err_max = max(cyc_max, cycle), max(err_max, err)
-            rec.append(recs)
-        return cyc_max, err_max, rec, jumped
+        Many elements are marched together (vectorized), and an element leaves the set once its
+        cycle has closed; the last few (<= SCALAR_LIMIT), or few from the start, are marched one
+        by one on Python scalars, where numpy's per-call overhead would dominate.
 
-    @staticmethod
-    def _march_jacobian(rec, closed, kt, kn, mu, fourier):
-        """Sensitivities of the closed cycle (see ``march``).
-
-        In the final (closed) cycle the slider sensitivity is affine in its start value,
-        dw_j = Phi_j dw_0 + d_j. The start value is that of the periodic state,
-        dw_0 = (I - Phi_nt)^-1 d_nt (implicit derivative of the fixed point w = Phi(w)); for neutral
-        elements (det(I - Phi_nt) ~ 0) it is the plain propagation of the history from rest.
+        Returns:
+            final record (the closing cycle of each element), history [(cycle, rows, record)]
+            (when keep), cycles per element, largest closure error, jumped (a Newton restart
+            changed the element's history).
         """
-        k, nt = closed.shape
-        nH = fourier.nH
-        nx = 3 * nH
-        E = fourier.E
-        eye = np.eye(2)
+        k, nt = tab.ut.shape
+        st = SimpleNamespace(tab=tab, final=_Record(k, nt), hist=[], keep=keep, newton=newton,
+                             close_tol=self.close_tol,
+                             cyc=np.zeros(k, dtype=int), dev=np.zeros(k), prev=np.zeros(k),
+                             jumped=np.zeros(k, dtype=bool))
+        rows, w, cycle = np.arange(k), np.zeros(k, dtype=complex), 0
+        while rows.size > SCALAR_LIMIT and cycle < max_cycles:
+            cycle += 1
+            rows, w = self._after_cycle(st, cycle, rows, w, _cycle_vector(tab, rows, w))
+            if not newton:
+                _give_up_if_slow(st, rows, cycle, max_cycles)
+        for i in range(rows.size):
+            e, w_e = rows[i:i + 1], w[i:i + 1]
+            tl = tab.take(e).scalars()
+            for c in range(cycle + 1, max_cycles + 1):
+                e, w_e = self._after_cycle(st, c, e, w_e, _cycle_scalar(tl, complex(w_e[0])))
+                if not e.size:
+                    break
+                if not newton:
+                    _give_up_if_slow(st, e, c, max_cycles)
+        return st.final, st.hist, st.cyc, st.dev.max(), st.jumped
 
-        def cycle_ops(slip, rho, that, sel=slice(None)):
-            cl, m, kn_, kt_ = closed[sel], mu[sel], kn[sel], kt[sel]
-            stick = cl & ~slip
-            P = eye - that[..., :, None] * that[..., None, :]
-            A = np.where(stick[..., None, None], eye, rho[..., None, None] * P)
-            c = (m[:, None, None] * slip[..., None]) * that                  # (k, nt, 2)
-            cn = c * (kn_[:, None, None] * cl[..., None])                    # c_j * dN/du_n
-            S = np.empty(slip.shape + (2, 3))
-            S[..., 0:2] = eye - A
-            S[..., 2] = -cn / kt_[:, None, None]
-            active = np.nonzero(~stick.all(axis=0))[0]                       # samples where dw may change
-            return A, cn, S, active
+    def _after_cycle(self, st: SimpleNamespace, cycle: int, rows, w, rec: _Record):
+        """Bookkeeping after a marched period of the elements rows: record it, test closure,
+        Newton-restart the open elements (from the second period on: 1D stick-slip and
+        transients close by then).
 
-        def sources(S):
-            return (S[..., None] * E[None, :, None, None, :]).reshape(S.shape[0], nt, 2, nx)
-
-        # final cycle with dw_0 = 0: particular part d_j and homogeneous part Phi_j
-        A, cn, S, active = cycle_ops(*rec[-1])
-        SE = sources(S)
-        d = np.zeros((k, 2, nx))
-        Ph = np.broadcast_to(eye, (k, 2, 2)).copy()
-        if k <= SCAN_LIMIT and active.size:
-            # few elements: prefix scan of the affine maps (log2(n) vectorized steps instead of
-            # one small step per sample)
-            Pc, Dc = _affine_scan(A[:, active], SE[:, active])
-            snaps_P = [Ph] + [Pc[:, i] for i in range(active.size)]
-            snaps_d = [d] + [Dc[:, i] for i in range(active.size)]
-            Ph, d = Pc[:, -1], Dc[:, -1]
-        else:
-            snaps_d, snaps_P = [d], [Ph]
-            for j in active:
-                d = A[:, j] @ d + SE[:, j]
-                Ph = A[:, j] @ Ph
-                snaps_d.append(d)
-                snaps_P.append(Ph)
-        Mfix = eye - Ph
-        det = Mfix[:, 0, 0] * Mfix[:, 1, 1] - Mfix[:, 0, 1] * Mfix[:, 1, 0]
-        fixed = np.abs(det) > NEWTON_DET
-        dw0 = np.zeros((k, 2, nx))
-        if fixed.any():
-            dw0[fixed] = np.linalg.solve(Mfix[fixed], d[fixed])
-        neutral = np.nonzero(~fixed)[0]
-        if neutral.size and len(rec) > 1:
-            # history from rest, only for the neutral elements
-            dwh = np.zeros((neutral.size, 2, nx))
-            for sl_c, rho_c, that_c in rec[:-1]:
-                # only the neutral elements' operators (not all, then sliced)
-                Ac, _, Sc, act = cycle_ops(sl_c[neutral], rho_c[neutral], that_c[neutral], neutral)
-                SEc = sources(Sc)
-                for j in act:
-                    dwh = Ac[:, j] @ dwh + SEc[:, j]
-            dw0[neutral] = dwh
-        # dw seen at sample j = after the updates of the active samples before j
-        which = np.searchsorted(active, np.arange(nt), side="left")
-        dws = (np.stack(snaps_P, axis=1)[:, which] @ dw0[:, None]
-               + np.stack(snaps_d, axis=1)[:, which])                         # (k, nt, 2, nx)
-        Q = np.empty((k, nt, 2, 3))
-        Q[..., 0:2] = kt[:, None, None, None] * A
-        Q[..., 2] = cn
-        # dT_j = Q_j (x) E_j - kt A_j dw_j
-        dT = (Q[..., None] * E[None, :, None, None, :]).reshape(k, nt, 2, nx)
-        dT = dT - kt[:, None, None, None] * (A @ dws)
-        dT = dT.transpose(0, 2, 1, 3)
-        dN = np.zeros((k, nt, 3, nH))
-        dN[:, :, 2] = (kn[:, None] * closed)[..., None] * E[None]
-        return dT, dN.reshape(k, nt, nx)
+        Returns the elements still to march and their start sliders."""
+        st.final.put(rows, rec)
+        st.cyc[rows] = cycle
+        if st.keep:
+            st.hist.append((cycle, rows, rec))
+        dev = np.abs(rec.wend - w) / st.tab.scale[rows]
+        st.prev[rows] = st.dev[rows]
+        st.dev[rows] = dev
+        go = np.nonzero(dev > self.close_tol)[0]
+        w_next = rec.wend[go]
+        if st.newton and cycle >= 2 and go.size:
+            rg = rec.take(go)
+            w_next = _newton_restart(w[go], rg.wend, _cycle_matrix(st.tab, rows[go], rg))
+            st.jumped[rows[go]] |= w_next != rg.wend
+        return rows[go], w_next
 
     # ------------------------------------------------------------------ AFT
     def evaluate(self, U: np.ndarray, fourier: Fourier, jacobian: bool = True):
@@ -543,3 +1530,108 @@ class FrictionContacts:
         status[closed.any(axis=1) & ~closed.all(axis=1)] = PARTLY_OPEN
         status[~closed.any(axis=1)] = OPEN
         return {"u_t": u[:, 0:2].copy(), "T": T, "N": Nt, "status": status, "slip_fraction": frac}
+
+
+# ---------------------------------------------------------------------------- Jacobian of a march
+def _sources(G: np.ndarray, E: np.ndarray, code: np.ndarray) -> np.ndarray:
+    """G_j (x) E of the stencil samples: (k, nt, 2, 3 nH) sources of the slider recurrence
+    (zero for stick steps; an open step's is E_j: w_j = u_j)."""
+    k, nt = G.shape[:2]
+    nH = E.shape[1]
+    S = np.zeros((k, nt, 2, 3, nH))
+    e, j = np.nonzero((code == SLIP_STEP) | (code == EVENT_STEP))
+    Est = E[(j[:, None] + _STENCIL) % nt]                              # (b, 4, nH)
+    S[e, j] = (G[e, j].reshape(-1, 6, 4) @ Est).reshape(-1, 2, 3, nH)
+    e, j = np.nonzero(code == OPEN_STEP)
+    S[e, j, 0, 0], S[e, j, 1, 1] = E[j], E[j]
+    return S.reshape(k, nt, 2, 3 * nH)
+
+
+def _propagate(A, SE, active, d0, P0=None):
+    """Slider sensitivities over the active samples: d_{i+1} = A d_i + SE; snapshots (k, n+1, 2, x)."""
+    k = A.shape[0]
+    if k <= SCAN_LIMIT and active.size:
+        # few elements: prefix scan of the affine maps (log2(n) vectorized steps instead of one
+        # small step per sample)
+        Pc, Dc = _affine_scan(A[:, active], SE[:, active])
+        Dc = Dc + Pc @ d0[:, None]
+        Ps = np.concatenate([np.broadcast_to(np.eye(2), (k, 1, 2, 2)), Pc], axis=1)
+        return Ps, np.concatenate([d0[:, None], Dc], axis=1)
+    Ph, d = np.broadcast_to(np.eye(2), (k, 2, 2)).copy(), d0
+    sP, sd = [Ph], [d]
+    for j in active:
+        d = A[:, j] @ d + SE[:, j]
+        Ph = A[:, j] @ Ph
+        sP.append(Ph)
+        sd.append(d)
+    return np.stack(sP, axis=1), np.stack(sd, axis=1)
+
+
+def _march_jacobian(tab: _StepTables, final: _Record, hist, cyc, fourier: Fourier):
+    """Sensitivities of the closed cycle (see ``FrictionContacts.march``).
+
+    In the final (closed) cycle the slider sensitivity is affine in its start value,
+    dw_j = Phi_j dw_0 + d_j. The start value is that of the periodic state,
+    dw_0 = (I - Phi_nt)^-1 d_nt (implicit derivative of the fixed point w = Phi(w)); for neutral
+    elements (det(I - Phi_nt) ~ 0) it is the plain propagation of the history from rest.
+    """
+    k, nt = final.code.shape
+    nH, E = fourier.nH, fourier.E
+    nx = 3 * nH
+    A, G = _local_jacobians(tab, final)
+    SE = _sources(G, E, final.code)
+    active = np.nonzero((final.code != STICK_STEP).any(axis=0))[0]      # samples where dw may change
+    Ps, Ds = _propagate(A, SE, active, np.zeros((k, 2, nx)))
+    Mfix = np.eye(2) - Ps[:, -1]
+    det = Mfix[:, 0, 0] * Mfix[:, 1, 1] - Mfix[:, 0, 1] * Mfix[:, 1, 0]
+    fixed = np.abs(det) > NEWTON_DET
+    dw0 = np.zeros((k, 2, nx))
+    if fixed.any():
+        dw0[fixed] = np.linalg.solve(Mfix[fixed], Ds[fixed, -1])
+    neutral = np.nonzero(~fixed)[0]
+    if neutral.size:
+        dw0[neutral] = _neutral_history(tab, hist, cyc, neutral, E)
+    # dw after step j = after the active steps up to and including j
+    which = np.searchsorted(active, np.arange(nt), side="right")
+    dws = Ps[:, which] @ dw0[:, None] + Ds[:, which]                     # (k, nt, 2, nx)
+    Et = np.zeros((nt, 2, nx))
+    Et[:, 0, 0:nH], Et[:, 1, nH:2 * nH] = E, E
+    dT = (tab.kt[:, None, None, None] * (Et[None] - dws)).transpose(0, 2, 1, 3)
+    dN = np.zeros((k, nt, 3, nH))
+    dN[:, :, 2] = (tab.kn[:, None] * tab.closed)[..., None] * E[None]
+    return dT, dN.reshape(k, nt, nx)
+
+
+def _neutral_history(tab: _StepTables, hist, cyc, neutral, E):
+    """Slider sensitivity at the start of the closing cycle of neutral elements: propagated from
+    rest through the cycles before it. All those cycles are differentiated in one batch and each
+    one's affine map composed at once; only the chaining of the cycles is sequential."""
+    pos = np.full(cyc.size, -1)
+    pos[neutral] = np.arange(neutral.size)
+    rows, recs, owner = [], [], []
+    for cycle, r, rec in hist:
+        q = np.nonzero((pos[r] >= 0) & (cycle < cyc[r]))[0]
+        if q.size:
+            rows.append(r[q])
+            recs.append(rec.take(q))
+            owner.append(pos[r[q]])
+    dwh = np.zeros((neutral.size, 2, 3 * E.shape[1]))
+    if not rows:
+        return dwh
+    rec = _Record(sum(x.size for x in rows), E.shape[0])
+    rec.put(slice(None), _concat_records(recs))
+    A, G = _local_jacobians(tab.take(np.concatenate(rows)), rec)
+    act = np.nonzero((rec.code != STICK_STEP).any(axis=0))[0]
+    Ps, Ds = _propagate(A, _sources(G, E, rec.code), act, np.zeros((A.shape[0], 2, dwh.shape[2])))
+    P, D = Ps[:, -1], Ds[:, -1]                     # each recorded cycle: dw -> P dw + D
+    for i, p in enumerate(np.concatenate(owner)):   # in march order, so cycles chain in order
+        dwh[p] = P[i] @ dwh[p] + D[i]
+    return dwh
+
+
+def _concat_records(recs):
+    """One _Record holding the rows of several."""
+    out = object.__new__(_Record)
+    for name in vars(recs[0]):
+        setattr(out, name, np.concatenate([getattr(r, name) for r in recs]))
+    return out

@@ -169,7 +169,8 @@ class HarmonicBalance:
         self.ne, self.nc = c.ne, 3 * c.ne
         self._pre = None          # cached preconditioner (GMRES path)
         self.krylov_tol = float(krylov_tol)
-        self.stats = {"residuals": 0, "linear_solves": 0, "gmres_iterations": 0, "sign_factorizations": 0}
+        self.stats = {"residuals": 0, "linear_solves": 0, "gmres_iterations": 0, "sign_factorizations": 0,
+                      "dense_fallbacks": 0}
 
     # ------------------------------------------------------------------ layouts
     def to_contact(self, U: np.ndarray) -> np.ndarray:
@@ -339,11 +340,22 @@ class HarmonicBalance:
             return [r.copy() for r in rhs]
         cn, idx, matvec, J, prec = self._reduced(omega, nl, Dg)
         B = np.stack([r[:, cn].ravel() for r in rhs], axis=1)   # (P, nrhs) reduced layout
+        if J is None:
+            try:
+                X = self._krylov(matvec, prec, B, B.shape[0])
+            except ConvergenceError:
+                J = self._dense_fallback(omega, nl, Dg)
         if J is not None:
             X = sla.lu_solve(sla.lu_factor(J, check_finite=False), B, check_finite=False)
-        else:
-            X = self._krylov(matvec, prec, B, B.shape[0])
         return [r - self._expand(omega, nl, cn, idx, Dg, X[:, i]) for i, r in enumerate(rhs)]
+
+    def _dense_fallback(self, omega, nl, Dg):
+        """The reduced Jacobian formed for an LU solve where GMRES stalled: the harmonic-averaged
+        preconditioner can be poor where a few elements' Jacobians are stiff (e.g. slip starting
+        right at a closing, where the slip law is singular), and the exact solve costs a
+        factorization of the reduced system instead of a failed continuation step."""
+        self.stats["dense_fallbacks"] += 1
+        return self._reduced(omega, nl, Dg, dense=True)[3]
 
     def linsolve_aug(self, omega, nl, Dg, Rw, tU, tw, rhs, exact_sign: bool = False):
         """Bordered Newton solves of pseudo-arc-length continuation (nonsingular at folds).
@@ -381,20 +393,23 @@ class HarmonicBalance:
         RwN = Rw[:, cn].ravel()
         P = RwN.size
         Bm = np.stack([np.concatenate([-R[:, cn].ravel(), [-c + np.sum(tR * R)]]) for R, c in rhs], axis=1)
+        if J is None:
+            def mv(z):
+                return np.concatenate([matvec(z[:P]) + RwN * z[P], [v @ z[:P] + beta * z[P]]])
+
+            def pc(z):
+                return np.concatenate([prec(z[:P]), [z[P] / beta if beta != 0 else z[P]]])
+            try:
+                Z = self._krylov(mv, pc, Bm, P + 1)
+                sign = 0
+            except ConvergenceError:
+                J = self._dense_fallback(omega, nl, Dg)
         if J is not None:
             A = np.empty((P + 1, P + 1))
             A[:P, :P], A[:P, P], A[P, :P], A[P, P] = J, RwN, v, beta
             lu, piv = sla.lu_factor(A, check_finite=False)
             Z = sla.lu_solve((lu, piv), Bm, check_finite=False)
             sign = int(np.prod(np.sign(np.diag(lu)))) * (-1) ** int(np.sum(piv != np.arange(P + 1)))
-        else:
-            def mv(z):
-                return np.concatenate([matvec(z[:P]) + RwN * z[P], [v @ z[:P] + beta * z[P]]])
-
-            def pc(z):
-                return np.concatenate([prec(z[:P]), [z[P] / beta if beta != 0 else z[P]]])
-            Z = self._krylov(mv, pc, Bm, P + 1)
-            sign = 0
         out = []
         for i, (R, c) in enumerate(rhs):
             xN, dw = Z[:P, i], Z[P, i]

@@ -51,10 +51,11 @@ def test_local_peak_matches_full_sweep(change: float) -> None:
     ref, _ = _sweep(rm, joint, level)
     loc, state2 = peak_near(rm, joint, level, first.peak_hz * (1 + 1e-3), state, SETTINGS)
     assert loc.n_points < ref.n_points / 3
-    # one element's stick–slip peak is nearly a cusp, where the parabolic polish of either
-    # search stops a few 1e-5 short; the v3 tolerance is 1e-3
-    assert loc.peak_hz == pytest.approx(ref.peak_hz, rel=2e-5)
-    assert loc.peak_amplitude == pytest.approx(ref.peak_amplitude, rel=2e-4)
+    # one element's stick–slip peak is a flat top at n_t = 32: the amplitude stays within 1e-5
+    # over ±0.1 Hz, so the parabolic polish of either search stops up to 1e-4 apart in frequency
+    # (6.3e-5 at change = 1.03) with amplitudes within 3e-6; the v3 tolerance is 1e-3
+    assert loc.peak_hz == pytest.approx(ref.peak_hz, rel=1e-4)
+    assert loc.peak_amplitude == pytest.approx(ref.peak_amplitude, rel=2e-5)
     assert state2.shape == state.shape
 
 

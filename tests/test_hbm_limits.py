@@ -147,6 +147,15 @@ def test_krylov_path_matches_direct():
     assert s1.n_nonlinear >= 3
     assert krylov.stats["gmres_iterations"] > 0
     assert np.abs(s1.coefficients - s2.coefficients).max() <= 1e-7 * np.abs(s1.coefficients).max()
+    # a GMRES that stalls falls back to the dense LU of the same reduced system: same solution
+    stalled = HarmonicBalance(s, c, harmonics=3, samples=64, dense_limit=0)
+
+    def stall(*_):
+        raise ConvergenceError("GMRES stalled (test)", 1.0)
+    stalled._krylov = stall
+    s3 = stalled.solve(w, f)
+    assert stalled.stats["dense_fallbacks"] >= 1 and stalled.stats["gmres_iterations"] == 0
+    assert np.abs(s1.coefficients - s3.coefficients).max() <= 1e-9 * np.abs(s1.coefficients).max()
 
 
 def test_newton_failure_raises_with_residual():
