@@ -110,8 +110,9 @@ def _dispatch(args: argparse.Namespace) -> int:
     from .pipeline.stages import REGISTRY
     ctx = run_stages(case, out, stages, REGISTRY, comm=MPI.COMM_WORLD, force=args.force,
                      progress=not args.no_progress)
-    if MPI.COMM_WORLD.rank == 0:
-        print(f"[fe-joint] done: {out}", flush=True)
+    if MPI.COMM_WORLD.rank == 0:   # the last line names the run's warnings (pipeline.guards)
+        from .pipeline.guards import done_line
+        print(done_line(out, ctx.warnings, report="report" in ctx.summaries), flush=True)
     del ctx
     return 0
 
