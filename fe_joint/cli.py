@@ -200,8 +200,9 @@ def _dispatch(args: argparse.Namespace) -> int:
     finally:
         if lock is not None:
             lock.release()
-    if comm.rank == 0:
-        print(f"[fe-joint] done: {out}", flush=True)
+    if comm.rank == 0:   # the last line names the run's warnings (pipeline.guards)
+        from .pipeline.guards import done_line
+        print(done_line(out, ctx.warnings, report="report" in ctx.summaries), flush=True)
     del ctx
     return 0
 

@@ -24,6 +24,15 @@ class CaseError(ValueError):
     """A case file, preset or command-line value is invalid; the message names the key."""
 
 
+class ArtifactError(CaseError):
+    """A file of a run's folder is missing, truncated or unreadable; the message names its path.
+
+    Exit 2 like bad input: the folder is the input of a resumed run or of ``fe-joint report``;
+    running again rebuilds the file (the stage that wrote it is rerun when its record does not
+    match the file).
+    """
+
+
 class ConvergenceError(RuntimeError):
     """An iterative FE solve (eigen solver, contact active set) did not converge; the message
     gives the residual or state reached."""

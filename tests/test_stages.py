@@ -84,3 +84,37 @@ def test_forced_stage_reruns_everything_after_it(tmp_path: Path) -> None:
     (tmp_path / "stages" / "fe.json").unlink()
     run_stages(case, tmp_path, STAGES, _registry(calls))
     assert calls == ["fe", "contact", "dynamics", "speed", "report"]
+
+
+def test_changed_artifact_or_unrecorded_manifest_reruns_the_stage(tmp_path: Path, capsys) -> None:
+    """A file edited in place (same size, other bytes) reruns the stage that wrote it, with one
+    line naming it; a manifest without a file record (an older run) is not trusted either."""
+    import json
+    case = load_case(preset="quick")
+    calls: list = []
+
+    def writer(name):
+        def f(ctx):
+            calls.append(name)
+            ctx.path(name).mkdir(exist_ok=True)
+            ctx.path(name, "a.bin").write_bytes(b"x" * 64)
+            return {}
+        return f
+    reg = {s: writer(s) for s in STAGES}
+    run_stages(case, tmp_path, ("contact",), reg)
+    f = tmp_path / "fe" / "a.bin"
+    f.write_bytes(b"y" * 64)
+    calls.clear()
+    capsys.readouterr()
+    run_stages(case, tmp_path, ("contact",), reg)
+    assert calls == ["fe", "contact"]
+    out = capsys.readouterr().out
+    assert [l for l in out.splitlines() if "a.bin" in l] == [
+        "[fe-joint] fe: fe/a.bin changed (sha256 differs): rerunning fe"]
+    m = tmp_path / "stages" / "contact.json"
+    man = json.loads(m.read_text())
+    del man["files"]
+    m.write_text(json.dumps(man))
+    calls.clear()
+    run_stages(case, tmp_path, ("contact",), reg)
+    assert calls == ["contact"]

@@ -56,7 +56,10 @@ REF_RTOL = 1e-6
 REF_TOLERANCES = (("n_points", None), ("n_nonlinear", None), ("coupling_rel_error", None),
                   ("linear_peak_rel_error", None), ("check-linear@tiny/dissipated", None),
                   ("joint_shear", 1e-2), ("dissipated", 1e-2), ("/v3/", 1e-2),
-                  ("interface_motion", 1e-4), ("peak_", 1e-4), ("reduced_vs_full", 1e-3))
+                  ("interface_motion", 1e-4), ("peak_", 1e-4), ("reduced_vs_full", 1e-3),
+                  # which curves have unstable points is a discrete count too; the warnings are
+                  # checked against the rest of the summary in test_warnings_list_the_suspect_results
+                  ("/warnings", None))
 
 
 def test_summary_equals_the_recorded_reference(run: Path) -> None:
@@ -153,6 +156,69 @@ def test_energy_balances_at_every_point_of_a_resonator_curve(run: Path) -> None:
     assert len(rel) >= 10
     assert max(rel) <= 1e-6, max(rel)
     assert max(share) > 0.2            # friction carries a real share of the dissipation
+
+
+def test_warnings_list_the_suspect_results(run: Path) -> None:
+    """summary.json's warnings are exactly the unconverged v3 fixed points and the curves with
+    unstable points (from the dynamics manifest); no cutoff warning (reduced vs full ≤ 1e-3) and
+    no gross-slip one (every level below the estimate); report.md lists them on top."""
+    s = _summary(run)
+    dyn = json.loads((run / "stages" / "dynamics.json").read_text())["summary"]
+    by_kind: dict = {}
+    for w in s["warnings"]:
+        by_kind.setdefault(w["kind"], []).append(w["subject"])
+    assert sorted(by_kind.get("v3-unconverged", [])) == sorted(
+        n for n, v in s["v3"].items() if not v["converged"])
+    assert sorted(by_kind.get("unstable", [])) == sorted(
+        n for n, c in dyn["curves"].items() if c["unstable_points"] > 0)
+    assert s["reduced_vs_full_max_rel_error"] < 1e-3 and "cutoff" not in by_kind
+    assert max(s["levels_over_macroslip"]) < 1 and "gross-slip" not in by_kind
+    head = (run / "report.md").read_text().split("## ")[0]
+    assert all(w["message"] in head for w in s["warnings"])
+
+
+def _copy_run(run: Path, dest: Path) -> Path:
+    import shutil
+    shutil.copytree(run, dest)
+    return dest
+
+
+def test_damaged_curve_and_new_level_rerun_only_their_jobs(run: Path, tmp_path: Path) -> None:
+    """A truncated curve and a level added below the others (every level renumbered, the middle
+    one still 15 N): only the new level's curves and the damaged one are computed; every other
+    curve is the old one (same wall time recorded), relabelled; the peaks match the old run's."""
+    from fe_joint.study.artifacts import load_curves
+    out = _copy_run(run, tmp_path / "run")
+    (out / "dynamics" / "baseline@L0.npz").write_bytes(
+        (run / "dynamics" / "baseline@L0.npz").read_bytes()[:2000])
+    case = tmp_path / "case.toml"
+    case.write_text(CASE.replace("levels = [2.0, 15.0, 40.0]", "levels = [0.5, 2.0, 15.0, 40.0]"))
+    assert main(["run", str(case), "--preset", "quick", "--out", str(out), "--no-progress"]) == 0
+    old = {(k.config, k.rq_um, cr.level): cr for k, cr in load_curves(run / "dynamics").items()}
+    new = load_curves(out / "dynamics")
+    computed = {k.name for k, cr in new.items()
+                if (k.config, k.rq_um, cr.level) not in old
+                or old[(k.config, k.rq_um, cr.level)].seconds != cr.seconds}
+    assert computed == {"baseline@L0", "v1@L0", "v3-rq15@L0", "baseline@L1"}
+    a, b = _summary(run), _summary(out)
+    for name, p in a["peaks"].items():
+        if "@L" in name and name != "baseline@L0":
+            head, i = name.rsplit("@L", 1)
+            assert b["peaks"][f"{head}@L{int(i) + 1}"]["peak_hz"] == p["peak_hz"], name
+
+
+def test_level_absurdly_beyond_gross_slip_is_rejected(run: Path, tmp_path: Path, capsys) -> None:
+    """levels = [1e5] (≈ 500× the gross-slip estimate): exit 2, one line naming dynamics.levels
+    and the estimate; no curve computed."""
+    out = _copy_run(run, tmp_path / "run")
+    case = tmp_path / "case.toml"
+    case.write_text(CASE.replace("levels = [2.0, 15.0, 40.0]", "levels = [1e5]"))
+    capsys.readouterr()
+    assert main(["run", str(case), "--preset", "quick", "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "dynamics.levels" in err[0] and "gross-slip estimate" in err[0], err
+    assert sorted(p.name for p in (out / "dynamics").iterdir()) == sorted(
+        p.name for p in (run / "dynamics").iterdir())
 
 
 def test_finished_stages_not_recomputed(run: Path) -> None:

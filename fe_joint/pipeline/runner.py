@@ -1,14 +1,17 @@
-"""Stage runner: input-hash caching, resumable runs and the stage log.
+"""Stage runner: input-hash caching, verified artifacts, resumable runs and the stage log.
 
 A run is a fixed sequence of stages. Each stage depends on some case sections and on the stages
 before it; its *key* is the hash of those sections, the upstream keys and the stage's code
-version. When a stage finishes, it writes ``DIR/stages/<stage>.json`` (key, seconds, summary) —
-after its artifacts, so a killed run never leaves a manifest for half-written output. A rerun
-skips every stage whose manifest key matches and that was computed from the current output of
-the stage before it (``cached`` in the log), and resumes at the first one that does not. Every action is appended to ``DIR/stage_log.jsonl``, which is also how the
-tests check that finished stages are not recomputed.
+version. When a stage finishes, it writes ``DIR/stages/<stage>.json`` (key, seconds, summary,
+warnings, and the files it wrote with their size and sha256) — after its artifacts, so a killed
+run never leaves a manifest for half-written output. A rerun skips a stage only if its manifest
+key matches, it was computed from the current output of the stage before it, and every file it
+recorded is still there with the same size and content (``cached`` in the log); otherwise it
+says which file is missing, truncated or changed and reruns the stage (and so everything after
+it). Every action is appended to ``DIR/stage_log.jsonl``, which is also how the tests check that
+finished stages are not recomputed.
 
-All MPI ranks call :func:`run_stages`; only rank 0 writes manifests and the log.
+All MPI ranks call :func:`run_stages`; only rank 0 checks files, writes manifests and the log.
 """
 from __future__ import annotations
 
@@ -22,6 +25,8 @@ from pathlib import Path
 from typing import Callable
 
 from ..case import Case, case_to_toml
+from ..study.artifacts import check_files, file_record
+from .guards import RunWarning
 
 #: the dynamics settings the study's curves depend on (not ``speed_study``: the speed stage's switch)
 _DYNAMICS_CURVES = tuple(f"dynamics.{k}" for k in
@@ -43,6 +48,12 @@ STAGE_INPUTS: dict[str, tuple[tuple[str, ...], str]] = {
                 "dynamics"), "2"),
 }
 STAGES: tuple[str, ...] = tuple(STAGE_INPUTS)
+#: what each stage writes, relative to the run folder (folders are walked); a stage may list its
+#: files itself instead (``StageContext.files``: the dynamics stage lists its study's jobs only)
+STAGE_OUTPUTS: dict[str, tuple[str, ...]] = {
+    "mesh": ("mesh",), "fe": ("fe",), "contact": ("contact",), "dynamics": ("dynamics",),
+    "speed": ("speed",), "report": ("report.md", "summary.json", "figures"),
+}
 #: the effective case of a run, written into its folder (``fe-joint report DIR`` reads it)
 CASE_FILE = "case.toml"
 
@@ -57,6 +68,8 @@ class StageContext:
     progress: bool = True
     keys: dict = field(default_factory=dict)      # stage → cache key (for stage-internal caches)
     runs: dict = field(default_factory=dict)      # stage → run id of its current output
+    files: dict = field(default_factory=dict)     # stage → the paths it wrote (overrides STAGE_OUTPUTS)
+    pending: list = field(default_factory=list)   # warnings of the stage being run
 
     @property
     def rank(self) -> int:
@@ -69,6 +82,18 @@ class StageContext:
     def print(self, *a, **kw) -> None:
         if self.rank == 0:
             print(*a, **kw, flush=True)
+
+    def warn(self, warnings: list[RunWarning]) -> None:
+        """Record warnings of the running stage (kept in its manifest) and print them (rank 0)."""
+        for w in warnings:
+            self.pending.append(w)
+            self.print(f"[fe-joint] warning: {w.message}")
+
+    @property
+    def warnings(self) -> list[RunWarning]:
+        """Every warning of the stages run or loaded from the cache, in stage order."""
+        return [RunWarning.from_dict(w) for s in STAGES
+                for w in (self.summaries.get(s) or {}).get("warnings", [])]
 
 
 def stage_keys(case: Case, stages: tuple[str, ...] = STAGES) -> dict[str, str]:
@@ -94,6 +119,29 @@ def read_manifest(out: Path, stage: str) -> dict | None:
         return json.loads(p.read_text())
     except (OSError, ValueError):
         return None
+
+
+def stage_files(out: Path, stage: str, ctx: StageContext) -> dict[str, dict]:
+    """The record of the files ``stage`` wrote: {relative path: {"size", "sha256"}} (rank 0)."""
+    paths = ctx.files.get(stage)
+    if paths is None:
+        paths = [out / p for p in STAGE_OUTPUTS[stage]]
+    return file_record(out, paths)
+
+
+def cache_problem(out: Path, stage: str, man: dict | None, key: str, upstream_run) -> str | None:
+    """Why the cached output of ``stage`` cannot be used, None if it can (rank 0).
+
+    Returns:
+        None when the manifest's key and upstream run match and every recorded file is intact;
+        "" when there is no usable manifest (a plain rerun, nothing to say); otherwise one line
+        naming the first missing, truncated or changed file.
+    """
+    if man is None or man.get("key") != key or man.get("upstream_run") != upstream_run:
+        return ""
+    if "files" not in man:   # a manifest from before files were recorded: cannot be checked
+        return f"stages/{stage}.json has no file record (an older run)"
+    return check_files(out, man["files"])
 
 
 def read_stage_log(out: Path) -> list[dict]:
@@ -130,13 +178,17 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
     last = max(STAGES.index(s) for s in stages)
     needed = STAGES[: last + 1]
     ctx = StageContext(case=case, out=out, comm=comm, progress=progress, keys=keys)
-    # a stage is cached only if its key matches and it was computed from the current output of
-    # the stage before it (each manifest records that stage's run id)
+    # a stage is cached only if its key matches, it was computed from the current output of the
+    # stage before it (each manifest records that stage's run id) and its files are intact
     prev_run = None
     for s in needed:
         man = read_manifest(out, s)
-        cached = (man is not None and man.get("key") == keys[s] and not (force and s in stages)
-                  and man.get("upstream_run") == prev_run)
+        cached = False
+        if rank == 0 and not (force and s in stages):
+            why = cache_problem(out, s, man, keys[s], prev_run)
+            cached = why is None
+            if why:   # one line naming the file ("" = nothing cached: say nothing)
+                ctx.print(f"[fe-joint] {s}: {why}: rerunning {s}")
         if comm is not None:  # every rank takes the same branch
             cached = comm.bcast(cached, root=0)
             man = comm.bcast(man, root=0)
@@ -147,8 +199,11 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
             continue
         ctx.print(f"[fe-joint] stage {s} ...")
         t0 = time.perf_counter()
+        ctx.pending = []
         summary = registry[s](ctx) or {}
         dt = time.perf_counter() - t0
+        if ctx.pending:
+            summary["warnings"] = [w.to_dict() for w in ctx.pending]
         ctx.summaries[s] = summary
         run_id = uuid.uuid4().hex if rank == 0 else None
         if comm is not None:
@@ -156,7 +211,8 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
         if rank == 0:
             _write_json_atomic(out / "stages" / f"{s}.json",
                                {"stage": s, "key": keys[s], "seconds": dt, "summary": summary,
-                                "run_id": run_id, "upstream_run": prev_run})
+                                "run_id": run_id, "upstream_run": prev_run,
+                                "files": stage_files(out, s, ctx)})
         prev_run = ctx.runs[s] = run_id
         _log(out, rank, {"stage": s, "action": "ran", "key": keys[s], "seconds": dt})
         ctx.print(f"[fe-joint] stage {s} done in {dt:.1f} s")

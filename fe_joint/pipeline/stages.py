@@ -16,10 +16,12 @@ from ..model.joint import stuck_modes
 from ..model.reduced_model import ReducedModel
 from ..study import contact as ms
 from ..study import jobs as study
-from ..study.artifacts import CurveKey, load_curves, rq_label
+from ..study.artifacts import (CurveKey, load_artifact, load_curves, read_json_artifact,
+                               rq_label, v3_pass0_file)
 from ..study.configurations import choose_levels, fixed_joints, joint_baseline
-from ..study.frf import SweepSettings
-from ..study.queue import prepare_folder, run_jobs
+from ..study.frf import CurveResult, SweepSettings
+from ..study.queue import run_jobs
+from . import guards
 from .runner import StageContext
 
 
@@ -61,7 +63,11 @@ def stage_fe(ctx: StageContext) -> dict:
 
 
 def _reduced_model(ctx: StageContext) -> ReducedModel:
-    return ReducedModel.load(str(ctx.path("fe", "reduced_model.h5")))
+    return load_artifact(ctx.path("fe", "reduced_model.h5"), lambda p: ReducedModel.load(str(p)))
+
+
+def _surfaces(ctx: StageContext) -> tuple[dict, dict]:
+    return load_artifact(ctx.path("contact", "surfaces.npz"), ms.load_surfaces)
 
 
 def _surface_summary(s: ms.SurfaceContact) -> dict:
@@ -114,47 +120,100 @@ def _curve_summary(cr) -> dict:
             "unstable_points": int(np.sum(~cr.stable))}
 
 
+def _v3_outputs(folder, jobs: list, comm) -> dict:
+    """Rank 0 reads the finished v3 fixed points the follow-up jobs need; every rank gets them."""
+    out = None
+    if comm is None or comm.rank == 0:
+        out = {}
+        for rq in sorted({j.rq_um for j in jobs}):
+            name = study.v3_job_name(rq)
+            rec = read_json_artifact(folder / f"{name}.json")
+
+            def arrays(p):
+                with np.load(p) as a:
+                    return {"kn": a["kn"], "kt": a["kt"]}
+            out[rq] = {**load_artifact(folder / f"{name}.arrays.npz", arrays), "f_lin": rec["f_lin"],
+                       "pass0": load_artifact(folder / v3_pass0_file(rq), CurveResult.load)}
+    return comm.bcast(out, root=0) if comm is not None else out
+
+
 def stage_dynamics(ctx: StageContext) -> dict:
-    """FRFs of every configuration and level, the v3 fixed point and the Rq sweep (HBM)."""
+    """FRFs of every configuration and level, the v3 fixed point and the Rq sweep (HBM).
+
+    Every job is cached on its own (:mod:`fe_joint.study.jobs`): only the jobs whose inputs
+    changed, or whose files are missing or damaged, run. Warns where a result is suspect
+    (:mod:`.guards`) and rejects a level absurdly beyond gross slip (exit 2) before any job runs.
+    """
     c = ctx.case
     rm = _reduced_model(ctx)
     setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
-    surfaces, extra = ms.load_surfaces(ctx.path("contact", "surfaces.npz"))
+    surfaces, extra = _surfaces(ctx)
     joints = fixed_joints(setup, surfaces, extra["kn_smooth"], c)
     f_lin = {name: stuck_modes(rm.K, rm.M, rm.pair_dofs, j).frequency for name, j in joints.items()}
     levels, level_info = choose_levels(rm, joints["baseline"], c)
+    # before any work: a level absurdly beyond gross slip is an input error, one beyond it a warning
+    ctx.warn(guards.gross_slip_guard(levels, level_info["macroslip"], c.contact.mu,
+                                     float(np.sum(joints["baseline"].n0))))
+    fe = ctx.summaries.get("fe") or {}
+    if fe.get("full_elastic_hz"):
+        ctx.warn(guards.cutoff_guard(fe["full_elastic_hz"], fe["reduced_elastic_hz"],
+                                     c.reduction.cutoff_hz, c.dynamics.band[1] * max(f_lin.values())))
     inp = study.StudyInputs(rm=rm, setup=setup, surfaces=surfaces, kn_smooth=extra["kn_smooth"],
                             joints=joints, levels=levels, f_lin=f_lin, case=c,
                             settings=SweepSettings.from_case(c))
     folder = ctx.path("dynamics")
-    # finished jobs are reused only for the same inputs and the same contact output
-    prepare_folder(folder, f"{ctx.keys['dynamics']}/{ctx.runs.get('contact')}", ctx.rank, ctx.comm)
-    jobs = study.jobs_for(c, levels)
     # the small-excitation check: far below first slip the FRF peak is the stuck linear mode
-    tiny = study.Job(kind="curve", config="baseline", level_index=None)
     inp_tiny = study.StudyInputs(**{**inp.__dict__, "levels": [level_info["first_slip"] * 1e-3]})
+    rm_key = study.rm_digest(rm)
+    tiny = study.with_keys(inp_tiny, [study.Job(kind="curve", config="baseline", level_index=None)],
+                           rm_key)
+    first = study.with_keys(inp, study.jobs_for(c, levels), rm_key)
+    v3_keys = {j.rq_um: j.key for j in first if j.kind == "v3"}
+    later = study.with_keys(inp, study.follow_up_jobs(c, levels), rm_key, v3_keys)
+    every = tiny + first + later
+    todo = study.plan_jobs(folder, every, say=ctx.print) if ctx.rank == 0 else []
+    if ctx.comm is not None:
+        todo = ctx.comm.bcast(todo, root=0)
+    names = {j.name for j in todo}
     ctx.print(f"[fe-joint] dynamics: levels {', '.join(f'{x:.3g}' for x in levels)} N "
-              f"(macroslip estimate {level_info['macroslip']:.3g} N), {len(jobs)} jobs")
+              f"(macroslip estimate {level_info['macroslip']:.3g} N), {len(todo)} of "
+              f"{len(every)} jobs to run ({len(every) - len(todo)} cached)")
     bar = None
-    if ctx.rank == 0 and ctx.progress:
+    if ctx.rank == 0 and ctx.progress and todo:
         from tqdm import tqdm
-        bar = tqdm(total=len(jobs) + 1, desc="dynamics", unit="job")
+        bar = tqdm(total=len(todo), desc="dynamics", unit="job")
     tick = (lambda job: bar.update(1)) if bar is not None else None
-    run_jobs(lambda job: study.run_job(inp_tiny, job), study.write_job, [tiny], folder, ctx.comm, tick)
-    run_jobs(lambda job: study.run_job(inp, job), study.write_job, jobs, folder, ctx.comm, tick)
+
+    def run(inputs, jobs):
+        run_jobs(lambda job: study.run_job(inputs, job), study.write_job,
+                 [j for j in jobs if j.name in names], folder, ctx.comm, tick, skip_done=False)
+    run(inp_tiny, tiny)
+    run(inp, first)
+    if any(j.name in names for j in later):
+        inp.v3_out = _v3_outputs(folder, later, ctx.comm)
+        run(inp, later)
     if bar is not None:
         bar.close()
+    ctx.files["dynamics"] = [folder / f for j in every for f in j.files]
     summary: dict = {"levels": levels, "level_info": level_info, "f_lin": f_lin, "curves": {},
                      "v3": {}}
     if ctx.rank == 0:
-        curves = load_curves(folder)
+        curves = load_curves(folder, sorted(k.name for j in every for k in j.curve_keys))
         summary["curves"] = {k.name: _curve_summary(cr) for k, cr in curves.items()}
-        for f in sorted(folder.glob("v3-*.json")):
-            summary["v3"][f.stem] = json.loads(f.read_text())
+        for j in first:
+            if j.kind == "v3":
+                summary["v3"][j.name] = read_json_artifact(folder / f"{j.name}.json")
         t = curves[CurveKey("baseline", None)]
         summary["linear_peak_rel_error"] = abs(t.peak_hz - f_lin["baseline"]) / f_lin["baseline"]
+        warn = []
+        for name, rec in summary["v3"].items():
+            warn += guards.v3_guard(name, rec, c.contact.kt_tol)
+        for k, cr in curves.items():
+            warn += guards.unstable_guard(k.name, cr.omega_hz, cr.stable)
+        summary["warnings"] = [w.to_dict() for w in warn]
     if ctx.comm is not None:
         summary = ctx.comm.bcast(summary, root=0)
+    ctx.warn([guards.RunWarning.from_dict(w) for w in summary.pop("warnings")])
     return summary
 
 
@@ -173,8 +232,9 @@ def stage_speed(ctx: StageContext) -> dict:
         grids = (64, 128, 256, 512) if c.roughness.grid >= 256 else (32, 64, c.roughness.grid * 2)
         tables[f"global BEM grid (Rq = {rq_label(c.roughness.v_rq_um)} µm)"] = speed_error.bem_grid(rm, c, grids)
         mid = len(levels) // 2
-        curves = load_curves(ctx.path("dynamics"))
-        cr = curves.get(CurveKey("baseline", mid))
+        name = CurveKey("baseline", mid).name
+        have = ctx.path("dynamics", f"{name}.npz").exists()
+        cr = load_curves(ctx.path("dynamics"), [name])[CurveKey("baseline", mid)] if have else None
         if cr is not None:
             setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
             joint = joint_baseline(setup, c.contact.k_ref)

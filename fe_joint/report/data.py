@@ -6,7 +6,6 @@ never from the solvers, so the report runs without dolfinx, PETSc or the HBM sol
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,7 +14,7 @@ import numpy as np
 from ..case import Case
 from ..model.reduced_model import ReducedModel
 from ..pipeline.runner import read_manifest
-from ..study.artifacts import CurveKey, load_curves, v3_job_name
+from ..study.artifacts import CurveKey, load_artifact, load_curves, read_json_artifact, v3_job_name
 from ..study.contact import SurfaceContact, load_surfaces
 from ..study.frf import CurveResult
 
@@ -116,7 +115,7 @@ class ReportData:
 
 
 def _read_json(path: Path) -> dict | None:
-    return json.loads(path.read_text()) if path.exists() else None
+    return read_json_artifact(path) if path.exists() else None
 
 
 def _v3_files(dyn: Path, rqs: list[float]) -> tuple[dict[float, dict], dict[float, dict]]:
@@ -128,8 +127,10 @@ def _v3_files(dyn: Path, rqs: list[float]) -> tuple[dict[float, dict], dict[floa
             records[rq] = rec
         f = dyn / f"{v3_job_name(rq)}.arrays.npz"
         if f.exists():
-            with np.load(f) as a:
-                arrays[rq] = {"kn": a["kn"], "kt": a["kt"]}
+            def read(p):
+                with np.load(p) as a:
+                    return {"kn": a["kn"], "kt": a["kt"]}
+            arrays[rq] = load_artifact(f, read)
     return records, arrays
 
 
@@ -144,13 +145,13 @@ def load_report_data(out: Path, case: Case) -> ReportData:
     """
     out = Path(out)
     manifests = {s: read_manifest(out, s) or {} for s in STAGES_READ}
-    surfaces, extra = load_surfaces(out / "contact" / "surfaces.npz")
+    surfaces, extra = load_artifact(out / "contact" / "surfaces.npz", load_surfaces)
     records, arrays = _v3_files(out / "dynamics", sorted(surfaces))
     return ReportData(
         out=out, case=case,
         summaries={s: m.get("summary", {}) for s, m in manifests.items()},
         stage_seconds={s: m["seconds"] for s, m in manifests.items() if "seconds" in m},
-        rm=ReducedModel.load(str(out / "fe" / "reduced_model.h5")),
+        rm=load_artifact(out / "fe" / "reduced_model.h5", lambda p: ReducedModel.load(str(p))),
         surfaces=surfaces, extra=extra, curves=load_curves(out / "dynamics"),
         v3_records=records, v3_arrays=arrays,
         speed=_read_json(out / "speed" / "speed_error.json"))

@@ -25,6 +25,15 @@ def _header(data: ReportData, s: dict) -> list[str]:
             f"{_fmt(s['linear_peak_rel_error'], '{:.1e}')}.", ""]
 
 
+def _warnings(s: dict) -> list[str]:
+    """The run's warnings (suspect results), one bullet each; nothing when there are none."""
+    w = s.get("warnings") or []
+    if not w:
+        return []
+    return ([f"**{len(w)} warning{'s' if len(w) > 1 else ''}** (results to treat with care):", ""]
+            + [f"- {x['message']}" for x in w] + [""])
+
+
 def _levels(data: ReportData, s: dict) -> list[str]:
     """The excitation levels (N) and their ratio to the macroslip estimate."""
     L = ["## Excitation levels", "",
@@ -175,7 +184,8 @@ def report_markdown(data: ReportData, summary: dict) -> str:
     Returns:
         Markdown text ending in a newline; figures are linked as ``figures/<name>.png``.
     """
-    L = (_header(data, summary) + _levels(data, summary) + _frf_table(data, summary)
+    head = _header(data, summary)
+    L = (head[:2] + _warnings(summary) + head[2:] + _levels(data, summary) + _frf_table(data, summary)
          + _contact(data, summary) + _joint_state(summary) + _interface_motion(summary)
          + _v3(summary) + _cost(summary) + _speed(data.speed))
     return "\n".join(L) + "\n"

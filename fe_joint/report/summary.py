@@ -9,7 +9,7 @@ import numpy as np
 from .joint_state import interface_motions, joint_shear, stuck_modes_by_configuration
 from ..study.artifacts import rq_label, v3_job_name
 from ..study.frf import CurveResult
-from .data import ReportData
+from .data import STAGES_READ, ReportData
 from .stiffness import configuration_joints, k_eq_table, rq_joints
 
 #: the mesh statistics copied from the mesh stage
@@ -37,6 +37,12 @@ def v3_section(data: ReportData) -> dict:
             for rq, r in sorted(data.v3_records.items())}
 
 
+def run_warnings(data: ReportData) -> list[dict]:
+    """The warnings the stages recorded in their manifests (``pipeline.guards.RunWarning`` as
+    dicts: kind, subject, message, value, limit), in stage order."""
+    return [dict(w) for s in STAGES_READ for w in (data.summaries.get(s) or {}).get("warnings", [])]
+
+
 def timings(data: ReportData) -> dict:
     """Wall times, s: per stage, the FE stage's parts and each contact surface's solves."""
     fe, ct = data.summaries["fe"], data.summaries["contact"]
@@ -59,6 +65,7 @@ def build_summary(data: ReportData) -> dict:
     motions = interface_motions(data, stuck)
     summary = {
         "case": data.case.name,
+        "warnings": run_warnings(data),
         "mesh": {k: data.summaries["mesh"].get(k) for k in MESH_KEYS},
         "first_elastic_hz_full_free": (fe.get("full_elastic_hz") or [None])[0],
         "reduced_vs_full_max_rel_error": fe.get("max_rel_freq_error"),

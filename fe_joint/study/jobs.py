@@ -3,9 +3,20 @@
 Work is cut into *jobs* — one FRF of a fixed configuration at one level, or one v3 fixed point
 (a full FRF, then short peak searches each followed by BEM loops on every element, then the full
 FRF of the converged joint) — that the MPI ranks take from a shared queue, longest first
-(:func:`fe_joint.study.queue.run_jobs`). Rank 0 writes each finished job to ``dynamics/<job>.npz`` at once: a killed
-run loses at most the jobs in flight and a rerun skips every job whose file exists (the folder
-is cleared when the stage's inputs change).
+(:func:`fe_joint.study.queue.run_jobs`). Two follow-up kinds need a finished v3 fixed point and
+run after the others: the comparison surface's v3 joint at the other levels (``v3-level``), and
+its pass-0 FRF kept as the v2 curve at the middle level (``v2-pass0``, no solve).
+
+Each job has a cache *key*, the digest of everything it reads (:func:`job_key`): the reduced
+model's matrices, the joint's arrays (loads, gaps, k_n, k_t), the level in N, the stuck
+frequency, the sweep settings and μ; a v3 fixed point also its surface, the BEM interface and the
+fixed-point settings. Rank 0 writes each finished job to ``dynamics/`` at once — its curves, then
+``<job>.json`` (the key and the size and sha256 of every file) as the marker. A rerun keeps a job
+whose marker has its key and whose files are intact, takes a job whose key is found under another
+name (the levels were renumbered) by relabelling its curves, and reruns the rest, saying which
+file was missing, truncated or changed (:func:`plan_jobs`). So adding a level or a configuration
+runs only the new curves, and changing μ reruns every curve (all depend on it) but not the
+contact stage.
 
 Excitation levels: the paper's 500/1000/2000 N do not transfer to this resonator (docs/design.md, "Excitation levels").
 With ``levels = "auto"`` they are taken from the stuck-joint estimate of the baseline
@@ -22,39 +33,64 @@ the v3 curve needed 299 continuation points there against ≈ 145 at half the ma
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from ..model.joint import JointModel
-from .artifacts import CurveKey, v3_job_name
+from .artifacts import (CurveKey, check_files, digest, file_record, load_artifact, v3_job_name,
+                        v3_pass0_file)
 from .contact import InterfaceSetup
 from .fixed_point import run_v3
-from .frf import SweepSettings, frf
+from .frf import CurveResult, SweepSettings, frf
+
+#: bump when a job's result changes for the same inputs (its key changes with it)
+JOB_VERSION = "1"
+#: job kinds that need a finished v3 fixed point (run in the second round)
+FOLLOW_UP = ("v3-level", "v2-pass0")
 
 
 @dataclass
 class Job:
-    """One unit of work: a fixed-configuration FRF (``kind = "curve"``) or a v3 fixed point.
+    """One unit of work.
 
     Attributes:
-        kind: "curve" or "v3".
+        kind: "curve" (a fixed configuration's FRF), "v3" (a fixed point), "v3-level" (the
+            converged v3 joint of ``rq_um`` at another level) or "v2-pass0" (the pass-0 FRF of
+            the v3 fixed point on ``rq_um``, kept as the v2 curve).
         config: configuration name.
         level_index: index into the study's levels (None: the small-excitation check).
         rq_um: the surface of a v3 fixed point, µm.
+        key: cache key (:func:`job_key`; "" until set).
     """
     kind: str
     config: str
     level_index: int | None = 0
     rq_um: float | None = None
+    key: str = ""
 
     @property
     def name(self) -> str:
-        """File stem of the job's record (e.g. ``baseline@L1``, ``v3-rq10``)."""
+        """File stem of the job's record (e.g. ``baseline@L1``, ``v3-rq10``, ``v3-rq10@L0``)."""
         if self.kind == "v3":
             return v3_job_name(self.rq_um)
-        return CurveKey(self.config, self.level_index).name
+        return self.curve_keys[0].name
+
+    @property
+    def curve_keys(self) -> list[CurveKey]:
+        """The study curves this job writes."""
+        if self.kind in ("v3", "v3-level"):
+            return [CurveKey("v3", self.level_index, self.rq_um)]
+        return [CurveKey(self.config, self.level_index)]
+
+    @property
+    def files(self) -> list[str]:
+        """Every file the job writes into the dynamics folder, its marker ``<name>.json`` last."""
+        out = [f"{k.name}.npz" for k in self.curve_keys]
+        if self.kind == "v3":
+            out += [f"{self.name}.arrays.npz", v3_pass0_file(self.rq_um)]
+        return out + [f"{self.name}.json"]
 
 
 @dataclass
@@ -69,6 +105,7 @@ class StudyInputs:
     f_lin: dict                  # name → stuck linear frequency, Hz
     case: object
     settings: SweepSettings
+    v3_out: dict = field(default_factory=dict)   # Rq → finished v3 fixed point (follow-up jobs)
 
 
 def jobs_for(case, levels: list) -> list[Job]:
@@ -93,40 +130,191 @@ def jobs_for(case, levels: list) -> list[Job]:
     return jobs
 
 
-def run_job(inp: StudyInputs, job: Job) -> dict:
-    """Run one job; returns {"curves": {CurveKey: CurveResult}, "meta": {...}, "arrays": {...}}."""
-    level = inp.levels[0 if job.level_index is None else job.level_index]
+def follow_up_jobs(case, levels: list) -> list[Job]:
+    """The jobs that need a finished v3 fixed point: the comparison surface's v3 joint at the
+    other levels (highest first) and its pass-0 FRF as the v2 curve at the middle level."""
+    d, r = case.dynamics, case.roughness
+    if "v3" not in d.configurations:
+        return []
+    mid = len(levels) // 2
+    jobs = [Job(kind="v3-level", config="v3", level_index=i, rq_um=r.v_rq_um)
+            for i in reversed(range(len(levels))) if i != mid]
+    if "v2" in d.configurations:
+        jobs.append(Job(kind="v2-pass0", config="v2", level_index=mid, rq_um=r.v_rq_um))
+    return jobs
+
+
+def rm_digest(rm) -> str:
+    """Digest of what the FRFs read from the reduced model (matrices, pairs, DOFs, damping)."""
+    return digest(np.asarray(rm.K), np.asarray(rm.M), np.asarray(rm.pair_dofs),
+                  float(rm.damping_ratio), int(rm.excitation_dof), int(rm.response_dof))
+
+
+def _setup_digest(s: InterfaceSetup) -> str:
+    """Digest of what the v3 patch loops read from the interface setup."""
+    return digest(s.pair_xy, s.area, s.n0_fe, s.gap_fe, s.p_s, s.g_s, s.side, s.patch, s.young,
+                  s.poisson, s.ig.mask, s.ig.owner, s.ig.xc, s.ig.yc)
+
+
+def _surface_digest(sc) -> str:
+    """Digest of what a v3 fixed point reads from its surface (not the timings)."""
+    return digest(sc.rq_um, sc.z, sc.n0, sc.gap_el, sc.kn, sc.kt_mindlin)
+
+
+def job_key(inp: "StudyInputs", job: Job, rm_key: str, v3_keys: dict | None = None) -> str:
+    """The cache key of ``job``: the digest of everything its result depends on.
+
+    Args:
+        inp: the study's inputs (for the small-excitation check: those with its level).
+        job: the job.
+        rm_key: :func:`rm_digest` of ``inp.rm`` (computed once per stage).
+        v3_keys: Rq → key of the v3 fixed point (needed by the follow-up kinds).
+    """
+    level = float(inp.levels[0 if job.level_index is None else job.level_index])
+    common = (JOB_VERSION, job.kind, rm_key, inp.settings, level)
     if job.kind == "curve":
-        key = CurveKey(job.config, job.level_index)
+        return digest(common, job.config, inp.joints[job.config], float(inp.f_lin[job.config]))
+    if job.kind == "v3":
+        c = inp.case.contact
+        return digest(common, _setup_digest(inp.setup), _surface_digest(inp.surfaces[job.rq_um]),
+                      float(c.kt_tol), int(c.kt_max_passes))
+    return digest(common, (v3_keys or {})[job.rq_um])
+
+
+def with_keys(inp: "StudyInputs", jobs: list[Job], rm_key: str,
+              v3_keys: dict | None = None) -> list[Job]:
+    """``jobs`` with their cache keys set (:func:`job_key`)."""
+    return [replace(j, key=job_key(inp, j, rm_key, v3_keys)) for j in jobs]
+
+
+def run_job(inp: StudyInputs, job: Job) -> dict:
+    """Run one job; returns {"curves": {CurveKey: CurveResult}, "meta": {...}, "arrays": {...}}
+    (a v3 fixed point also "pass0", its pass-0 CurveResult)."""
+    level = inp.levels[0 if job.level_index is None else job.level_index]
+    key = job.curve_keys[0]
+    if job.kind == "curve":
         cr = frf(inp.rm, inp.joints[job.config], level, inp.f_lin[job.config], inp.settings)
         return {"curves": {key: cr.with_key(key)}, "meta": {}, "arrays": {}}
+    if job.kind == "v3-level":
+        # the converged joint of the fixed point on this surface, at another level
+        v = inp.v3_out[job.rq_um]
+        sc = inp.surfaces[job.rq_um]
+        j3 = JointModel("v3", n0=sc.n0, gap=sc.gap_el, kn=v["kn"], kt=v["kt"],
+                        area=inp.setup.area, rq_um=job.rq_um)
+        return {"curves": {key: frf(inp.rm, j3, level, v["f_lin"], inp.settings).with_key(key)},
+                "meta": {}, "arrays": {}}
+    if job.kind == "v2-pass0":
+        # pass 0 of the v3 fixed point is the v2 FRF at this level: kept, not run twice
+        return {"curves": {key: inp.v3_out[job.rq_um]["pass0"].with_key(key)}, "meta": {},
+                "arrays": {}}
     out = run_v3(inp, job.rq_um, level)
-    key = CurveKey("v3", job.level_index, job.rq_um)
-    curves = {key: out["curve"].with_key(key)}
     meta = {"history": out["history"], "converged": out["converged"], "rq_um": job.rq_um,
             "f_lin": out["f_lin"]}
-    if job.rq_um == inp.case.roughness.v_rq_um:
-        # pass 0 on the comparison surface is the v2 FRF at this level: kept, not run twice
-        if "v2" in inp.case.dynamics.configurations:
-            k2 = CurveKey("v2", job.level_index)
-            curves[k2] = out["first"].with_key(k2)
-        # the v3 surface of the comparison also gets the other levels with its converged k
-        sc = inp.surfaces[job.rq_um]
-        j3 = JointModel("v3", n0=sc.n0, gap=sc.gap_el, kn=out["kn"], kt=out["kt"],
-                        area=inp.setup.area, rq_um=job.rq_um)
-        for i, lv in enumerate(inp.levels):
-            if i != job.level_index:
-                ki = CurveKey("v3", i, job.rq_um)
-                curves[ki] = frf(inp.rm, j3, lv, out["f_lin"], inp.settings).with_key(ki)
-    return {"curves": curves, "meta": meta, "arrays": {"kn": out["kn"], "kt": out["kt"]}}
+    return {"curves": {key: out["curve"].with_key(key)}, "meta": meta,
+            "arrays": {"kn": out["kn"], "kt": out["kt"]}, "pass0": out["first"]}
 
 
 def write_job(folder: Path, job: Job, r: dict) -> None:
-    """Write one finished job's files (rank 0); the .json marks the job done and is written last."""
+    """Write one finished job's files (rank 0); the .json marks the job done and is written last.
+
+    The marker holds the job, its key, its curves' names, the size and sha256 of each file and
+    the job's meta data (a v3 fixed point's history).
+    """
+    folder = Path(folder)
     for key, cr in r["curves"].items():
         cr.save(folder / f"{key.name}.npz")
     if r["arrays"]:
-        np.savez(folder / f"{job.name}.arrays.npz", **r["arrays"])
-    (folder / f"{job.name}.json").write_text(json.dumps(
-        {"job": {**job.__dict__, "name": job.name}, "curves": [k.name for k in r["curves"]],
-         **r["meta"]}, default=float))
+        tmp = folder / f"{job.name}.arrays.tmp.npz"
+        np.savez(tmp, **r["arrays"])
+        tmp.replace(folder / f"{job.name}.arrays.npz")
+    if r.get("pass0") is not None:
+        r["pass0"].save(folder / v3_pass0_file(job.rq_um))
+    files = file_record(folder, [folder / f for f in job.files[:-1]])
+    marker = {"job": {**job.__dict__, "name": job.name}, "key": job.key,
+              "curves": [k.name for k in r["curves"]], "files": files, **r["meta"]}
+    tmp = folder / f"{job.name}.json.tmp"
+    tmp.write_text(json.dumps(marker, default=float))
+    tmp.replace(folder / f"{job.name}.json")
+
+
+def read_marker(folder: Path, name: str) -> dict | None:
+    """A job's marker, None if it is missing or unreadable."""
+    try:
+        m = json.loads((Path(folder) / f"{name}.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return m if isinstance(m, dict) and "key" in m and "files" in m else None
+
+
+def _load_job(folder: Path, job: Job, marker: dict) -> dict:
+    """A finished job's result read back from its files (to be written under another name)."""
+    old = Job(**{k: v for k, v in marker["job"].items() if k != "name"})
+    curves = {}
+    for k_old, k_new in zip(old.curve_keys, job.curve_keys):
+        cr = load_artifact(folder / f"{k_old.name}.npz", CurveResult.load)
+        curves[k_new] = cr.with_key(k_new)
+    r = {"curves": curves, "arrays": {}, "meta": {k: marker[k] for k in
+                                                 ("history", "converged", "rq_um", "f_lin")
+                                                 if k in marker}}
+    if old.kind == "v3":
+        def arrays(p):
+            with np.load(p) as a:
+                return {"kn": a["kn"], "kt": a["kt"]}
+        r["arrays"] = load_artifact(folder / f"{old.name}.arrays.npz", arrays)
+        r["pass0"] = load_artifact(folder / v3_pass0_file(old.rq_um), CurveResult.load)
+    return r
+
+
+def plan_jobs(folder: Path, jobs: list[Job], say=print) -> list[Job]:
+    """Which keyed jobs must run; reuse finished ones, relabelled if the levels were renumbered.
+
+    Rank 0 only. A job is kept when its marker has its key and every file it recorded is
+    intact. A job whose key is found in another job's marker (the same curve under another
+    level index) is written under its own name from those files. Every other job is to run;
+    when a marker with the right key is there but a file is not, ``say`` gets one line naming
+    it. Files of jobs no longer in the study are removed, so the folder holds this study only.
+
+    Args:
+        folder: the dynamics folder (created if missing).
+        jobs: every job of the study, keys set.
+        say: where the one-line messages go.
+    Returns:
+        the jobs to run, in the given order.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    markers = {}
+    for f in sorted(folder.glob("*.json")):
+        m = read_marker(folder, f.stem)
+        if m is not None:
+            markers[f.stem] = m
+    by_key: dict[str, str] = {}
+    for name, m in markers.items():
+        by_key.setdefault(m["key"], name)
+    todo, reuse = [], []
+    for job in jobs:
+        m = markers.get(job.name)
+        # in place: same key and the same curve names (a v3 fixed point keeps its name when the
+        # middle level is renumbered, its curve does not)
+        if m is not None and m["key"] == job.key and m.get("curves") == [
+                k.name for k in job.curve_keys]:
+            why = check_files(folder, m["files"])
+            if why is None:
+                continue
+            say(f"[fe-joint] dynamics: dynamics/{why}: recomputing {job.name}")
+            todo.append(job)
+            continue
+        src = by_key.get(job.key)
+        if src is not None and check_files(folder, markers[src]["files"]) is None:
+            reuse.append((job, markers[src]))
+        else:
+            todo.append(job)
+    # read every reused result before writing any: a new name may be an old job's
+    loaded = [(job, _load_job(folder, job, m)) for job, m in reuse]
+    keep = {f for job in jobs for f in job.files}
+    for f in folder.iterdir():
+        if f.is_file() and f.name not in keep:
+            f.unlink()
+    for job, r in loaded:
+        write_job(folder, job, r)
+    return todo

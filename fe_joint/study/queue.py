@@ -3,7 +3,6 @@ serves it from a thread and writes each result as it arrives (a killed run loses
 in flight)."""
 from __future__ import annotations
 
-import shutil
 import time
 from pathlib import Path
 from typing import Callable
@@ -25,8 +24,11 @@ POLL_SECONDS = 0.05
 
 
 def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, comm=None,
-             progress=None) -> None:
+             progress=None, skip_done: bool = True) -> None:
     """Run the jobs not yet on disk, dealt dynamically to the ranks, longest first.
+
+    With ``skip_done`` a job whose ``<name>.json`` marker exists is skipped; without it rank 0's
+    ``jobs`` are run as given (the caller decided, e.g. :func:`fe_joint.study.jobs.plan_jobs`).
 
     Jobs differ in cost by 50× (a v3 fixed point vs a low-level FRF), so a static deal leaves
     ranks idle. Rank 0 works through the queue too; a server thread on rank 0 (MPI_THREAD_MULTIPLE)
@@ -37,7 +39,9 @@ def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, c
     """
     rank = comm.rank if comm is not None else 0
     size = comm.size if comm is not None else 1
-    todo = [j for j in jobs if not (folder / f"{j.name}.json").exists()] if rank == 0 else None
+    todo = None
+    if rank == 0:
+        todo = [j for j in jobs if not (skip_done and (folder / f"{j.name}.json").exists())]
     if comm is not None:
         todo = comm.bcast(todo, root=0)
     failure = None
@@ -119,15 +123,3 @@ def _serve_and_work(run_job: Callable, write_job: Callable, todo: list, folder: 
         finished(job, r, fail)
     server.join()
     return state["failure"]
-
-
-def prepare_folder(folder: Path, key: str, rank: int, comm=None) -> None:
-    """Make ``folder``; clear it if it holds results of other inputs (key mismatch)."""
-    if rank == 0:
-        kf = folder / "KEY"
-        if folder.exists() and (not kf.exists() or kf.read_text() != key):
-            shutil.rmtree(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        kf.write_text(key)
-    if comm is not None:
-        comm.barrier()
