@@ -532,3 +532,22 @@ def _harmonics(el: _Element, segs, H: int) -> np.ndarray:
         out[:, 2::2] += (vals * wx) @ s.T / np.pi
     out[2, 0] -= el.n0
     return out
+
+
+def elliptic_orbits_with_separation(H: int = 2) -> np.ndarray:
+    """Relative-displacement harmonics (6, 3, 2H + 1), mm, of six elements: tangential ellipses
+    of various axes, tilts and phases (plus a 2nd harmonic), and a normal oscillation that opens
+    the contact for part of the cycle: the 2D-slip-with-separation case of the AFT's tests and
+    benchmark (scripts/bench_aft2d.py), with coulomb_element_reference as its reference."""
+    rows = [(0.10, 0.05, 0.3, 0.0, 0.015, 0.4, 0.01), (0.08, 0.02, -0.7, 1.0, 0.012, 2.0, 0.0),
+            (0.05, 0.04, 1.2, 2.0, 0.020, -1.0, 0.005), (0.12, 0.01, 0.0, -0.5, 0.011, 0.0, 0.02),
+            (0.03, 0.025, 0.5, 0.7, 0.013, 3.0, 0.0), (0.20, 0.15, -0.2, 1.5, 0.016, 1.0, 0.01)]
+    U = np.zeros((len(rows), 3, 2 * H + 1))
+    for e, (a, b, tilt, ph, an, phn, h2) in enumerate(rows):
+        rot = np.array([[np.cos(tilt), -np.sin(tilt)], [np.sin(tilt), np.cos(tilt)]])
+        # (a cos(th + ph), b sin(th + ph)) on (cos th, sin th), then tilted
+        U[e, 0:2, 1:3] = rot @ np.array([[a * np.cos(ph), -a * np.sin(ph)],
+                                         [b * np.sin(ph), b * np.cos(ph)]])
+        U[e, 0, 3] = h2
+        U[e, 2, 1:3] = an * np.cos(phn), an * np.sin(phn)
+    return U

@@ -67,6 +67,7 @@ sys.path.insert(0, ROOT)
 import hbm  # noqa: E402
 from hbm.fourier import Fourier  # noqa: E402
 from hbm.reference import (circular_orbit_force, coulomb_element_reference,  # noqa: E402
+                           elliptic_orbits_with_separation as ellipses,
                            jenkins_describing_function)
 
 KT, KN, MU, N0 = 100.0, 1000.0, 0.3, 10.0
@@ -94,21 +95,6 @@ def contacts(mod, ne: int, **kw):
     par = dict(kt=KT, kn=KN, mu=MU, n0=N0)
     par.update(kw)
     return mod.FrictionContacts(np.tile([[0, 1, 2], [-1, -1, -1]], (ne, 1, 1)), **par)
-
-
-def ellipses(H: int = 2) -> np.ndarray:
-    """The six separating elliptic orbits of tests/test_hbm_aft2d.py."""
-    rows = [(0.10, 0.05, 0.3, 0.0, 0.015, 0.4, 0.01), (0.08, 0.02, -0.7, 1.0, 0.012, 2.0, 0.0),
-            (0.05, 0.04, 1.2, 2.0, 0.020, -1.0, 0.005), (0.12, 0.01, 0.0, -0.5, 0.011, 0.0, 0.02),
-            (0.03, 0.025, 0.5, 0.7, 0.013, 3.0, 0.0), (0.20, 0.15, -0.2, 1.5, 0.016, 1.0, 0.01)]
-    U = np.zeros((len(rows), 3, 2 * H + 1))
-    for e, (a, b, tilt, ph, an, phn, h2) in enumerate(rows):
-        rot = np.array([[np.cos(tilt), -np.sin(tilt)], [np.sin(tilt), np.cos(tilt)]])
-        U[e, 0:2, 1:3] = rot @ np.array([[a * np.cos(ph), -a * np.sin(ph)],
-                                         [b * np.sin(ph), b * np.cos(ph)]])
-        U[e, 0, 3] = h2
-        U[e, 2, 1:3] = an * np.cos(phn), an * np.sin(phn)
-    return U
 
 
 def separation_1d(H: int = 2) -> np.ndarray:

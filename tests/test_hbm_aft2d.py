@@ -13,7 +13,7 @@ import pytest
 import hbm.friction as friction
 from hbm import FrictionContacts
 from hbm.fourier import Fourier
-from hbm.reference import circular_orbit_force, coulomb_element_reference
+from hbm.reference import circular_orbit_force, coulomb_element_reference, elliptic_orbits_with_separation
 
 KT, KN, MU, N0 = 100.0, 1000.0, 0.3, 10.0        # N/mm, N/mm, -, N
 
@@ -24,21 +24,7 @@ def contacts(ne: int, **kw) -> FrictionContacts:
     return FrictionContacts(np.tile([[0, 1, 2], [-1, -1, -1]], (ne, 1, 1)), **par)
 
 
-def ellipses(H: int = 2) -> np.ndarray:
-    """Six elements: tangential ellipses of various axes, tilts and phases (plus a 2nd harmonic),
-    and a normal oscillation that opens the contact for part of the cycle."""
-    rows = [(0.10, 0.05, 0.3, 0.0, 0.015, 0.4, 0.01), (0.08, 0.02, -0.7, 1.0, 0.012, 2.0, 0.0),
-            (0.05, 0.04, 1.2, 2.0, 0.020, -1.0, 0.005), (0.12, 0.01, 0.0, -0.5, 0.011, 0.0, 0.02),
-            (0.03, 0.025, 0.5, 0.7, 0.013, 3.0, 0.0), (0.20, 0.15, -0.2, 1.5, 0.016, 1.0, 0.01)]
-    U = np.zeros((len(rows), 3, 2 * H + 1))
-    for e, (a, b, tilt, ph, an, phn, h2) in enumerate(rows):
-        rot = np.array([[np.cos(tilt), -np.sin(tilt)], [np.sin(tilt), np.cos(tilt)]])
-        # (a cos(th + ph), b sin(th + ph)) on (cos th, sin th), then tilted
-        U[e, 0:2, 1:3] = rot @ np.array([[a * np.cos(ph), -a * np.sin(ph)],
-                                         [b * np.sin(ph), b * np.cos(ph)]])
-        U[e, 0, 3] = h2
-        U[e, 2, 1:3] = an * np.cos(phn), an * np.sin(phn)
-    return U
+ellipses = elliptic_orbits_with_separation
 
 
 def switch_chains(ne: int = 12, H: int = 3) -> np.ndarray:
