@@ -336,3 +336,20 @@ def test_gmsh_import_keeps_the_ctrl_c_handler() -> None:
     got = {how: subprocess.run([sys.executable, "-c", code, how], capture_output=True, text=True,
                                env=env).stdout.strip() for how in ("plain", "cli")}
     assert got == {"plain": "False", "cli": "True"}
+
+
+def test_scripts_run_on_two_ranks_prints_one_line_for_bad_input(tmp_path):
+    """The user's command on 2 ranks: a bad case file → exit 2, one line on stderr (no mpirun
+    banner, not once per rank), nothing on stdout, nothing written."""
+    import os
+    import subprocess
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "out"
+    env = dict(os.environ, FE_JOINT_NP="2")
+    r = subprocess.run([str(root / "scripts" / "run"), str(tmp_path / "missing.toml"), "--out", str(out)],
+                       capture_output=True, text=True, env=env, timeout=300)
+    assert r.returncode == 2, r.stderr
+    assert r.stdout == ""
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "missing.toml" in lines[0], r.stderr
+    assert not out.exists()
