@@ -112,7 +112,10 @@ def make_run(run: Path) -> dict:
         (run / d).mkdir(parents=True)
     _reduced_model().save(str(run / "fe" / "reduced_model.h5"))
     surfaces = {rq: _surface(rq, rng) for rq in (1.0, 5.0)}
-    extra = {"kn_smooth": rng.uniform(2e4, 9e4, NE), "p_s": rng.uniform(0, 200, (GRID, GRID))}
+    c = np.arange(GRID) - (GRID - 1) / 2
+    hole = np.hypot(*np.meshgrid(c, c, indexing="ij")) < GRID / 5       # the bolt hole, masked
+    p_s = rng.uniform(0, 200, (GRID, GRID)) * (rng.random((GRID, GRID)) < 0.8) * ~hole
+    extra = {"kn_smooth": rng.uniform(2e4, 9e4, NE), "p_s": p_s, "mask": ~hole}
     save_surfaces(run / "contact" / "surfaces.npz", surfaces, extra)
     curves = {}
     for i, lv in enumerate(LEVELS):
@@ -186,6 +189,19 @@ def test_contact_numbers(report):
     assert s["kn_smooth_mean"] == pytest.approx(math.fsum(kn_s) / NE, rel=1e-14)
     assert s["kn_smooth_max"] == max(kn_s)
     assert s["coupling_rel_error"] == 3e-11
+
+
+def test_contact_area_on_three_nominal_areas(report):
+    """Real area / usable, / whole overlap (the paper's) and / FE-loaded, counted by hand."""
+    _, w, s = report
+    mask, p_s = w["extra"]["mask"], w["extra"]["p_s"]
+    for rq, sc in w["surfaces"].items():
+        c = s["contact_area"]["1" if rq == 1.0 else "5"]
+        real = np.sum((sc.pressure > 0) & mask)
+        assert c["fraction_usable"] == pytest.approx(real / mask.sum(), rel=1e-12)
+        assert c["fraction_overlap"] == pytest.approx(real / GRID ** 2, rel=1e-12)
+        assert c["fraction_fe_loaded"] == pytest.approx(real / np.sum((p_s > 0) & mask), rel=1e-12)
+        assert c["peak_pressure_MPa"] == sc.pressure.max()
 
 
 def test_peaks_equal_the_curves(report):

@@ -30,7 +30,7 @@ PRESETS: dict[str, dict] = {
     "quick": {
         "geometry": {"lap_mesh_size": 4.0, "body_mesh_size": 14.0},   # 201 pairs, 29 769 P2 DOFs
         "reduction": {"n_check_modes": 4},
-        "roughness": {"grid": 64, "patch": 8, "rq_um": [1.0, 15.0]},
+        "roughness": {"grid": 64, "patch": 8, "rq_um": [1.0, 15.0], "seeds": 3},
         "dynamics": {"harmonics": 1, "samples": 32, "max_points": 600, "speed_study": False},
         "contact": {"kt_max_passes": 2},
     },

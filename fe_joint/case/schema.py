@@ -135,6 +135,13 @@ class Roughness(_Section):
     grid: int = _f(256, lo=16, hi=4096)                          # global BEM grid (grid × grid)
     patch: int = _f(16, lo=4, hi=256)                            # local patch per friction element
     hardness: float = _f(0.0, lo=0.0, hi=1e6, unit="MPa")                            # MPa; 0 = purely elastic (the paper)
+    # surface realizations per Rq of the contact-stage seed statistics (seeds seed … seed+seeds−1;
+    # contact area, k_eq, stuck frequency; no FRFs): docs/design.md, "Rough contact"
+    seeds: int = _f(5, lo=1, hi=100)
+    # MPa, indentation hardness of the faces (stainless steel ≈ 200 HV ≈ 2.0 GPa): the report sets
+    # the peak asperity pressures beside it and the contact stage repeats the sweep with the
+    # pressure capped at it (0: no capped variant); ``hardness`` > 0 caps the study itself
+    material_hardness: float = _f(2000.0, lo=0.0, hi=1e6, unit="MPa")
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ import numpy as np
 from ..model.joint import stuck_modes
 from ..model.reduced_model import ReducedModel
 from ..study import contact as ms
+from ..study import variants
 from ..study import jobs as study
 from ..study.artifacts import (CurveKey, load_artifact, load_curves, read_json_artifact,
                                rq_label, v3_pass0_file)
@@ -97,12 +98,24 @@ def stage_contact(ctx: StageContext) -> dict:
     z_smooth = ms.surface(setup, r.smooth_rq_um, r.corr_length, r.seed)
     kn_smooth = ms.element_normal_stiffness(setup, z_smooth, setup.n0_fe, comm=ctx.comm)
     t_smooth = time.perf_counter() - t0
+    # seed statistics and the hardness-capped sweep (no FRFs; study/variants.py)
+    t0 = time.perf_counter()
+    seeds = variants.seed_study(setup, rm, r, surfaces, comm=ctx.comm)
+    t_seeds = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    capped = variants.hardness_study(setup, rm, r, surfaces, comm=ctx.comm)
+    t_capped = time.perf_counter() - t0
     if ctx.rank == 0:
         ctx.path("contact").mkdir(parents=True, exist_ok=True)
         ms.save_surfaces(ctx.path("contact", "surfaces.npz"), surfaces, extra={
             "kn_smooth": kn_smooth, "p_s": setup.p_s, "g_s": setup.g_s, "mask": setup.ig.mask,
             "flat_pressure": flat.pressure})
+        variants.write_json(ctx.path("contact", "seeds.json"), seeds)
+        variants.write_json(ctx.path("contact", "hardness.json"), capped)
+    ctx.print(f"[fe-joint] contact: {r.seeds} seeds per Rq in {t_seeds:.1f} s, hardness-capped "
+              f"sweep in {t_capped:.1f} s")
     return {
+        "seeds_seconds": t_seeds, "hardness_seconds": t_capped,
         "coupling_rel_error": coupling_err, "pressure_interpolation_scale": setup.pressure_scale,
         "grid": r.grid, "patch": r.patch, "patch_side_mm": setup.side,
         "surfaces": {rq_label(rq): _surface_summary(s) for rq, s in surfaces.items()},

@@ -45,6 +45,8 @@ class ReportData:
         v3_records: Rq in µm → the v3 fixed point's record (``history``, ``converged``, …).
         v3_arrays: Rq in µm → the converged v3 stiffnesses {``kn``, ``kt``}, (ne,) N/mm³ each.
         speed: the speed-against-error tables, None when the file is missing.
+        seeds: the contact stage's seed statistics (``contact/seeds.json``), None if missing.
+        hardness: the hardness-capped sweep (``contact/hardness.json``), None if missing.
     """
     out: Path
     case: Case
@@ -57,6 +59,8 @@ class ReportData:
     v3_records: dict[float, dict]
     v3_arrays: dict[float, dict[str, np.ndarray]]
     speed: dict | None
+    seeds: dict | None = None
+    hardness: dict | None = None
 
     @property
     def dynamics(self) -> dict:
@@ -97,6 +101,12 @@ class ReportData:
     def rqs(self) -> list[float]:
         """Rq of every contact surface, ascending, µm."""
         return sorted(self.surfaces)
+
+    @property
+    def cell_area(self) -> float:
+        """Cell area of the global BEM grid, mm² (the grid spans overlap × plate width)."""
+        g = self.case.geometry
+        return g.overlap * g.plate_width / self.extra["mask"].size
 
     @property
     def xy(self) -> np.ndarray:
@@ -154,4 +164,6 @@ def load_report_data(out: Path, case: Case) -> ReportData:
         rm=load_artifact(out / "fe" / "reduced_model.h5", lambda p: ReducedModel.load(str(p))),
         surfaces=surfaces, extra=extra, curves=load_curves(out / "dynamics"),
         v3_records=records, v3_arrays=arrays,
-        speed=_read_json(out / "speed" / "speed_error.json"))
+        speed=_read_json(out / "speed" / "speed_error.json"),
+        seeds=_read_json(out / "contact" / "seeds.json"),
+        hardness=_read_json(out / "contact" / "hardness.json"))

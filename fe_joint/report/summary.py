@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..study.contact import contact_area
+from .damping import damping_by_curve, slip_onsets
 from .joint_state import interface_motions, joint_shear, stuck_modes_by_configuration
 from ..study.artifacts import rq_label, v3_job_name
 from ..study.frf import CurveResult
@@ -50,6 +52,27 @@ def timings(data: ReportData) -> dict:
             "contact": {k: v.get("seconds") for k, v in ct.get("surfaces", {}).items()}}
 
 
+def contact_areas(data: ReportData) -> dict:
+    """Per Rq: the real contact area and its fractions of the usable overlap (ours), the whole
+    overlap (the paper's) and the FE-loaded region (study.contact.ContactArea), and the peak
+    pressure (MPa)."""
+    mask, p_s = data.extra["mask"].astype(bool), data.extra["p_s"]
+    out = {}
+    for rq in data.rqs:
+        sc = data.surfaces[rq]
+        ca = contact_area(mask, data.cell_area, sc.pressure, p_s)
+        out[rq_label(rq)] = {"real_mm2": ca.real, "usable_mm2": ca.usable, "overlap_mm2": ca.overlap,
+                             "fe_loaded_mm2": ca.fe_loaded,
+                             **{f"fraction_{k}": v for k, v in ca.fractions().items()},
+                             "peak_pressure_MPa": float(sc.pressure.max())}
+    return out
+
+
+def seed_statistics(data: ReportData) -> dict:
+    """Per Rq: mean/std/min/max over the realizations of the contact stage (contact/seeds.json)."""
+    return {k: {"seeds": v["seeds"], **v["stats"]} for k, v in (data.seeds or {}).items()}
+
+
 def build_summary(data: ReportData) -> dict:
     """The summary of a run.
 
@@ -63,6 +86,8 @@ def build_summary(data: ReportData) -> dict:
     kn_smooth = data.extra["kn_smooth"]
     stuck = stuck_modes_by_configuration(data)
     motions = interface_motions(data, stuck)
+    damping = damping_by_curve(data, stuck)
+    peaks = {k.name: {**curve_peak(cr), **damping.get(k.name, {})} for k, cr in data.curves.items()}
     summary = {
         "case": data.case.name,
         "warnings": run_warnings(data),
@@ -77,7 +102,11 @@ def build_summary(data: ReportData) -> dict:
         "kn_smooth_mean": float(np.mean(kn_smooth)), "kn_smooth_max": float(np.max(kn_smooth)),
         "k_eq": k_eq_table(configuration_joints(data)),
         "k_eq_vs_rq": {rq_label(q): v for q, v in k_eq_table(rq_joints(data)).items()},
-        "peaks": {k.name: curve_peak(cr) for k, cr in data.curves.items()},
+        "peaks": peaks,
+        "structural_damping_ratio": data.rm.damping_ratio,
+        "slip_onset_response_mm": slip_onsets(data, stuck),
+        "contact_area": contact_areas(data),
+        "material_hardness_MPa": data.case.roughness.material_hardness,
         "v3": v3_section(data),
         "joint_shear_top_level": joint_shear(data),
         "interface_motion": motions,
@@ -85,6 +114,10 @@ def build_summary(data: ReportData) -> dict:
         "linear_peak_rel_error": dyn.get("linear_peak_rel_error"),
         "timings_s": timings(data),
     }
+    if data.seeds:
+        summary["seeds"] = seed_statistics(data)
+    if data.hardness:
+        summary["hardness_variant"] = data.hardness
     if data.speed:
         summary["speed_vs_error"] = data.speed
     return summary

@@ -129,7 +129,7 @@ def rough_contact(setup: InterfaceSetup, rq_um: float, corr_length: float, seed:
                       hardness=hardness if hardness > 0 else None)
     t1 = time.perf_counter()
     el = element_loads(ig, ns.pressure, ns.gap, setup.area, setup.bolt_force)
-    kn = (element_normal_stiffness(setup, z, el["n0"], comm=comm) if stiffness
+    kn = (element_normal_stiffness(setup, z, el["n0"], comm=comm, hardness=hardness) if stiffness
           else np.zeros(len(setup.area)))
     t2 = time.perf_counter()
     usable = ig.mask.sum()
@@ -149,13 +149,57 @@ def element_patches(setup: InterfaceSetup, z: np.ndarray) -> np.ndarray:
 
 
 def element_normal_stiffness(setup: InterfaceSetup, z: np.ndarray, n0: np.ndarray,
-                             comm=None) -> np.ndarray:
-    """k_n (N/mm³) of every element at its load; patches split over the ranks."""
+                             comm=None, hardness: float = 0.0) -> np.ndarray:
+    """k_n (N/mm³) of every element at its load; patches split over the ranks.
+
+    ``hardness`` > 0 caps the patch pressures too (MPa); k_n is then the unloading stiffness of
+    the whole contact set (``contact_bem.patch_normal_stiffness``)."""
     P = element_patches(setup, z)
     sl = _split(len(n0), comm)
     cell = (setup.side / setup.patch, setup.side / setup.patch)
-    k = patch_normal_stiffness(P[sl], cell, setup.young, setup.poisson, patch_loads(setup, n0)[sl])
+    k = patch_normal_stiffness(P[sl], cell, setup.young, setup.poisson, patch_loads(setup, n0)[sl],
+                               hardness=hardness if hardness > 0 else None)
     return _gather_concat(k, comm)
+
+
+@dataclass(frozen=True)
+class ContactArea:
+    """The real contact area of a global solve over three nominal areas (all in mm²).
+
+    Attributes:
+        real: area of the cells with p > 0 (outside the bolt hole).
+        usable: the overlap without the bolt-hole cells: where contact is possible (our fraction).
+        overlap: the whole overlap, hole included: the square the paper's 256² grid covers, its
+            "total potential contact area" (the paper's fraction).
+        fe_loaded: where the smooth FE preload pressure is positive (the region the bolt clamps).
+    """
+    real: float
+    usable: float
+    overlap: float
+    fe_loaded: float
+
+    def fractions(self) -> dict[str, float]:
+        """real / usable (ours), real / overlap (the paper's) and real / fe_loaded."""
+        return {"usable": self.real / self.usable, "overlap": self.real / self.overlap,
+                "fe_loaded": self.real / self.fe_loaded if self.fe_loaded > 0 else float("nan")}
+
+
+def contact_area(mask: np.ndarray, cell_area: float, pressure: np.ndarray,
+                 p_smooth: np.ndarray) -> ContactArea:
+    """The contact area of a pressure field on the global grid over the three nominal areas.
+
+    Args:
+        mask: (n, n) bool, True outside the bolt hole.
+        cell_area: mm².
+        pressure: (n, n) MPa, the rough solve's pressure.
+        p_smooth: (n, n) MPa, the smooth FE pressure on the grid.
+    Returns:
+        the ContactArea (mm²).
+    """
+    real = float(((pressure > 0) & mask).sum() * cell_area)
+    return ContactArea(real=real, usable=float(mask.sum() * cell_area),
+                       overlap=float(mask.size * cell_area),
+                       fe_loaded=float(((p_smooth > 0) & mask).sum() * cell_area))
 
 
 def element_loop_stiffness(setup: InterfaceSetup, z: np.ndarray, n_mean: np.ndarray,

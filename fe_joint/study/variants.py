@@ -1,0 +1,162 @@
+"""Contact-stage variants of the Rq sweep, without FRFs (issue 13, items 6 and 7).
+
+* **Seed statistics**: ``roughness.seeds`` surface realizations per Rq (seeds ``seed`` …
+  ``seed + seeds − 1``; the first is the study's own surface). Per realization: the contact
+  fraction (over the usable and over the whole overlap), the v2 joint's k_n,eq and k_t,eq
+  (patch k_n at N0, Mindlin k_t) and its stuck breathing-mode frequency; per Rq their mean,
+  sample standard deviation, min and max.
+* **Hardness cap**: the sweep's surfaces (seed ``seed``) solved again with the pressure capped at
+  ``roughness.material_hardness`` (perfectly plastic asperities; the patches capped too, k_n the
+  unloading stiffness of the flattened contact), the same numbers beside the study's own.
+
+Both are cheap (one global solve, one batch of patches and one shifted eigenproblem per
+realization) and written to ``contact/seeds.json`` and ``contact/hardness.json``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+from scipy.sparse.linalg import LinearOperator, eigsh
+
+from ..model.joint import JointModel, stuck_modes, stuck_stiffness
+from .artifacts import rq_label
+from .configurations import joint_v2
+from .contact import InterfaceSetup, SurfaceContact, contact_area, rough_contact
+
+#: the per-realization numbers the variants report (keys of :func:`joint_numbers`)
+NUMBERS = ("contact_fraction", "contact_fraction_overlap", "kn_eq", "kt_eq", "stuck_hz",
+           "peak_pressure", "capped_share", "loaded_elements")
+
+
+def stuck_frequency(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: JointModel,
+                    f_guess: float) -> float:
+    """The stuck breathing-mode frequency (Hz) by one shift-and-invert solve near ``f_guess``.
+
+    The same mode as :func:`~fe_joint.model.joint.stuck_modes` (the first elastic one) at a
+    fraction of its cost (one LU instead of a dense tridiagonalisation): the three eigenvalues
+    nearest σ = (2π f_guess)² are the breathing mode and rigid-body modes as long as f_guess is
+    closer to the breathing mode than the next elastic mode is (on the resonator 245 vs 544 Hz;
+    the realizations move it by < 1 %).
+
+    Args:
+        K, M: (n, n) reduced stiffness (N/mm) without the joint and mass (t).
+        pair_dofs: (ne, 2, 3) reduced DOFs of the pairs.
+        joint: the configuration (its loaded elements become springs).
+        f_guess: Hz, a nearby frequency (e.g. the first realization's, from ``stuck_modes``).
+    Returns:
+        the frequency of the lowest elastic mode among those nearest the shift, Hz.
+    """
+    Ks = stuck_stiffness(K, pair_dofs, joint)
+    sigma = (2 * np.pi * f_guess) ** 2
+    lu = sla.lu_factor(Ks - sigma * M)
+    n = Ks.shape[0]
+    op = LinearOperator((n, n), matvec=lambda x: sla.lu_solve(lu, x), dtype=float)
+    w2 = eigsh(Ks, k=3, M=M, sigma=sigma, OPinv=op, which="LM", return_eigenvectors=False)
+    f = np.sqrt(np.clip(np.sort(w2), 0, None)) / (2 * np.pi)
+    elastic = f[f > 1e-4 * f[-1] + 1.0]
+    if len(elastic) == 0:
+        raise ValueError("stuck joint: no elastic mode near the shift")
+    return float(elastic[0])
+
+
+def joint_numbers(setup: InterfaceSetup, rm, sc: SurfaceContact, hardness: float,
+                  f_guess: float | None) -> dict:
+    """The numbers of one realization's v2 joint.
+
+    Args:
+        setup: the interface (grid, mask, smooth pressure).
+        rm: the ReducedModel (K, M, pair DOFs).
+        sc: the realization's rough contact (its pressure, N0, k_n).
+        hardness: the pressure cap of the solve, MPa (0: none; sets ``capped_share``).
+        f_guess: Hz, shift of :func:`stuck_frequency`; None: the exact ``stuck_modes``.
+    Returns:
+        contact fractions (usable, overlap), kn_eq / kt_eq N/mm³, stuck_hz Hz, peak_pressure MPa,
+        capped_share (the contact area's share at the cap), loaded_elements.
+    """
+    ca = contact_area(setup.ig.mask, setup.ig.cell_area, sc.pressure, setup.p_s)
+    fr = ca.fractions()
+    joint = joint_v2(setup, sc)
+    if f_guess is None:
+        f = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency
+    else:
+        f = stuck_frequency(rm.K, rm.M, rm.pair_dofs, joint, f_guess)
+    c = sc.pressure > 0
+    capped = float(np.sum(c & (sc.pressure >= hardness * (1 - 1e-9))) / max(c.sum(), 1)) if hardness > 0 else 0.0
+    return {"contact_fraction": fr["usable"], "contact_fraction_overlap": fr["overlap"],
+            "kn_eq": joint.k_eq("kn"), "kt_eq": joint.k_eq("kt"), "stuck_hz": f,
+            "peak_pressure": float(sc.pressure.max()), "capped_share": capped,
+            "loaded_elements": int(np.sum(sc.n0 > 0))}
+
+
+def statistics(values) -> dict:
+    """mean, sample standard deviation (0 for one value), min, max and count of ``values``."""
+    v = np.asarray(values, float)
+    return {"mean": float(v.mean()), "std": float(v.std(ddof=1)) if len(v) > 1 else 0.0,
+            "min": float(v.min()), "max": float(v.max()), "n": int(len(v))}
+
+
+def seed_study(setup: InterfaceSetup, rm, roughness, surfaces: dict[float, SurfaceContact],
+               comm=None) -> dict:
+    """Several surface realizations per Rq of the sweep: per-seed numbers and their statistics.
+
+    Args:
+        setup: the interface.
+        rm: the ReducedModel.
+        roughness: the case's Roughness section (rq_um, v_rq_um, corr_length, seed, seeds, hardness).
+        surfaces: the study's own surfaces (seed ``roughness.seed``), reused as the first seed.
+        comm: MPI communicator (patches split over the ranks) or None.
+    Returns:
+        {rq label: {"rq_um", "seeds": [...], "per_seed": {number: [...]}, "stats": {number: stats}}}.
+    """
+    out = {}
+    for rq in sorted(surfaces):
+        seeds = [roughness.seed + i for i in range(roughness.seeds)]
+        rows, f0 = [], None
+        for s in seeds:
+            sc = surfaces[rq] if s == roughness.seed else rough_contact(
+                setup, rq, roughness.corr_length, s, hardness=roughness.hardness, comm=comm)
+            row = joint_numbers(setup, rm, sc, roughness.hardness, f0)
+            f0 = f0 or row["stuck_hz"]
+            rows.append(row)
+        per = {k: [r[k] for r in rows] for k in NUMBERS}
+        out[rq_label(rq)] = {"rq_um": rq, "seeds": seeds, "per_seed": per,
+                             "stats": {k: statistics(v) for k, v in per.items()}}
+    return out
+
+
+def hardness_study(setup: InterfaceSetup, rm, roughness, surfaces: dict[float, SurfaceContact],
+                   comm=None) -> dict:
+    """The sweep's surfaces with the pressure capped at ``roughness.material_hardness``.
+
+    Returns:
+        {} when the hardness is 0; else {"hardness_MPa": H, "surfaces": {rq label: {"rq_um",
+        "study": numbers of the study's own solve, "capped": numbers with the cap}}}.
+    """
+    H = roughness.material_hardness
+    if H <= 0:
+        return {}
+    out = {}
+    for rq in sorted(surfaces):
+        own = joint_numbers(setup, rm, surfaces[rq], roughness.hardness, None)
+        sc = rough_contact(setup, rq, roughness.corr_length, roughness.seed, hardness=H, comm=comm)
+        out[rq_label(rq)] = {"rq_um": rq, "study": own,
+                             "capped": joint_numbers(setup, rm, sc, H, own["stuck_hz"])}
+    return {"hardness_MPa": H, "surfaces": out}
+
+
+def write_json(path, data: dict) -> None:
+    """Write ``data`` as indented JSON atomically (rank 0)."""
+    import json
+    import os
+    tmp = str(path) + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(data, f, indent=1)
+    os.replace(tmp, path)
+
+
+def read_json(path) -> dict | None:
+    """What :func:`write_json` wrote, None when the file is missing (runs before the variants)."""
+    import json
+    from pathlib import Path
+    p = Path(path)
+    return json.loads(p.read_text()) if p.exists() else None
