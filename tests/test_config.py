@@ -142,6 +142,6 @@ def test_check_prints_every_value_with_its_source(tmp_path: Path, capsys) -> Non
     assert {k for k, v in src.items() if v == "file"} == {
         "roughness.grid", "geometry.lap_mesh_size", "dynamics.harmonics"}
     assert {k for k, v in src.items() if v == "preset quick"} == {
-        "geometry.body_mesh_size", "reduction.n_check_modes", "roughness.patch", "roughness.rq_um",
+        "geometry.body_mesh_size", "reduction.n_check_modes", "roughness.patch", "roughness.rq_um", "roughness.seeds",
         "dynamics.samples", "dynamics.max_points", "dynamics.speed_study", "contact.kt_max_passes"}
     assert set(src.values()) == {"file", "preset quick", "default"}
