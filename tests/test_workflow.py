@@ -66,6 +66,8 @@ def test_summary_equals_the_recorded_reference(run: Path) -> None:
     ref = json.loads((DATA / "e2e_summary.json").read_text())
     bad = []
     for rel, path, a, b in differences(ref, _summary(run)):
+        if a == "<missing>":
+            continue       # a key newer than the recorded reference: nothing to compare it with
         tol = next((t for frag, t in REF_TOLERANCES if frag in path), REF_RTOL)
         if tol is not None and rel > tol:
             bad.append((rel, path, a, b))

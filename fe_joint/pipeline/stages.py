@@ -16,7 +16,7 @@ from ..model.joint import stuck_modes
 from ..model.reduced_model import ReducedModel
 from ..study import contact as ms
 from ..study import jobs as study
-from ..study.artifacts import CurveKey, load_curves, rq_label
+from ..study.artifacts import CurveKey, load_backbones, load_curves, rq_label
 from ..study.configurations import choose_levels, fixed_joints, joint_baseline
 from ..study.frf import SweepSettings
 from ..study.queue import prepare_folder, run_jobs
@@ -135,13 +135,18 @@ def stage_dynamics(ctx: StageContext) -> dict:
     inp_tiny = study.StudyInputs(**{**inp.__dict__, "levels": [level_info["first_slip"] * 1e-3]})
     ctx.print(f"[fe-joint] dynamics: levels {', '.join(f'{x:.3g}' for x in levels)} N "
               f"(macroslip estimate {level_info['macroslip']:.3g} N), {len(jobs)} jobs")
+    # the backbones need the v3 fixed points' converged k and the forced peaks' amplitudes:
+    # they run after the FRF jobs, on the same queue
+    bb_jobs = study.backbone_jobs(c)
     bar = None
     if ctx.rank == 0 and ctx.progress:
         from tqdm import tqdm
-        bar = tqdm(total=len(jobs) + 1, desc="dynamics", unit="job")
+        bar = tqdm(total=len(jobs) + len(bb_jobs) + 1, desc="dynamics", unit="job")
     tick = (lambda job: bar.update(1)) if bar is not None else None
     run_jobs(lambda job: study.run_job(inp_tiny, job), study.write_job, [tiny], folder, ctx.comm, tick)
     run_jobs(lambda job: study.run_job(inp, job), study.write_job, jobs, folder, ctx.comm, tick)
+    run_jobs(lambda job: study.run_backbone_job(inp, folder, job), study.write_backbone_job,
+             bb_jobs, folder, ctx.comm, tick)
     if bar is not None:
         bar.close()
     summary: dict = {"levels": levels, "level_info": level_info, "f_lin": f_lin, "curves": {},
@@ -151,6 +156,10 @@ def stage_dynamics(ctx: StageContext) -> dict:
         summary["curves"] = {k.name: _curve_summary(cr) for k, cr in curves.items()}
         for f in sorted(folder.glob("v3-*.json")):
             summary["v3"][f.stem] = json.loads(f.read_text())
+        summary["backbones"] = {k.name: {"seconds": br.seconds, "points": int(br.omega.size),
+                                         "snms_hz": br.snms_hz.tolist(),
+                                         "snms_amplitude": br.snms_amplitude.tolist()}
+                                for k, br in load_backbones(folder).items()}
         t = curves[CurveKey("baseline", None)]
         summary["linear_peak_rel_error"] = abs(t.peak_hz - f_lin["baseline"]) / f_lin["baseline"]
     if ctx.comm is not None:

@@ -7,7 +7,7 @@ never from the solvers, so the report runs without dolfinx, PETSc or the HBM sol
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +15,7 @@ import numpy as np
 from ..case import Case
 from ..model.reduced_model import ReducedModel
 from ..pipeline.runner import read_manifest
-from ..study.artifacts import CurveKey, load_curves, v3_job_name
+from ..study.artifacts import BackboneKey, CurveKey, load_backbones, load_curves, v3_job_name
 from ..study.contact import SurfaceContact, load_surfaces
 from ..study.frf import CurveResult
 
@@ -46,6 +46,7 @@ class ReportData:
         v3_records: Rq in µm → the v3 fixed point's record (``history``, ``converged``, …).
         v3_arrays: Rq in µm → the converged v3 stiffnesses {``kn``, ``kt``}, (ne,) N/mm³ each.
         speed: the speed-against-error tables, None when the file is missing.
+        backbones: every finished backbone of ``dynamics/backbones/`` ({} for a run without).
     """
     out: Path
     case: Case
@@ -58,6 +59,7 @@ class ReportData:
     v3_records: dict[float, dict]
     v3_arrays: dict[float, dict[str, np.ndarray]]
     speed: dict | None
+    backbones: dict = field(default_factory=dict)
 
     @property
     def dynamics(self) -> dict:
@@ -109,6 +111,13 @@ class ReportData:
         """(ne,) tributary areas of the friction elements, mm²."""
         return np.asarray(self.rm.pair_area)
 
+    def backbone_curves(self, key: BackboneKey) -> dict:
+        """The forced curves of a backbone's joint, {level index: CurveResult} (v3: on its
+        surface)."""
+        return {k.level_index: cr for k, cr in self.curves.items()
+                if k.config == key.config and k.level_index is not None
+                and (key.config != "v3" or k.rq_um == key.rq_um)}
+
     def curve(self, config: str, level_index: int) -> CurveResult | None:
         """The FRF of a configuration at a level (v3: on the comparison surface), None if absent."""
         rq = self.v_rq if config == "v3" else None
@@ -153,4 +162,5 @@ def load_report_data(out: Path, case: Case) -> ReportData:
         rm=ReducedModel.load(str(out / "fe" / "reduced_model.h5")),
         surfaces=surfaces, extra=extra, curves=load_curves(out / "dynamics"),
         v3_records=records, v3_arrays=arrays,
-        speed=_read_json(out / "speed" / "speed_error.json"))
+        speed=_read_json(out / "speed" / "speed_error.json"),
+        backbones=load_backbones(out / "dynamics"))

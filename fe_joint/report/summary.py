@@ -9,6 +9,7 @@ import numpy as np
 from .joint_state import interface_motions, joint_shear, stuck_modes_by_configuration
 from ..study.artifacts import rq_label, v3_job_name
 from ..study.frf import CurveResult
+from .backbones import backbones_section
 from .data import ReportData
 from .stiffness import configuration_joints, k_eq_table, rq_joints
 
@@ -78,6 +79,8 @@ def build_summary(data: ReportData) -> dict:
         "linear_peak_rel_error": dyn.get("linear_peak_rel_error"),
         "timings_s": timings(data),
     }
+    if data.backbones:
+        summary["backbones"] = backbones_section(data)
     if data.speed:
         summary["speed_vs_error"] = data.speed
     return summary
