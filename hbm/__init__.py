@@ -14,6 +14,7 @@ Public API (docs/design.md, "Public API")::
     bb = hb.nonlinear_mode(mode=0, amplitudes=(a0, a1), dof=d, n_points=40)   # EPMC backbone
     bb.omega, bb.zeta, bb.displacement_amplitude, bb.friction_energy, bb.element_status
     sr = synthesize(bb, force); sr.peak_omega, sr.peak_amplitude, sr.omega_low, sr.omega_high
+                                                 # mode + off-resonant background (bb.background)
 """
 from .errors import ConvergenceError
 from .fourier import Fourier
@@ -21,9 +22,10 @@ from .friction import FrictionContacts, STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OP
 from .structure import LinearStructure
 from .harmonic_balance import HarmonicBalance, Solution, ElementResults
 from .continuation import ContinuationSettings, FRFResult
-from .nonlinear_mode import Backbone
+from .nonlinear_mode import Backbone, LinearBackground
 from .synthesis import SynthesizedResponse, synthesize
 
 __all__ = ["ConvergenceError", "Fourier", "FrictionContacts", "LinearStructure", "HarmonicBalance",
            "Solution", "ElementResults", "FRFResult", "ContinuationSettings", "STUCK", "STICK_SLIP",
-           "GROSS_SLIP", "PARTLY_OPEN", "OPEN", "Backbone", "SynthesizedResponse", "synthesize"]
+           "GROSS_SLIP", "PARTLY_OPEN", "OPEN", "Backbone", "LinearBackground", "SynthesizedResponse",
+           "synthesize"]

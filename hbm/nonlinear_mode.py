@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import copy
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -98,6 +98,53 @@ class _ModeReceptance(Receptance):
 
 
 @dataclass
+class LinearBackground:
+    """The off-resonant part of the linear base's receptance at one DOF: every kept mode except
+    the mode of interest, plus the static residual flexibility of the discarded modes.
+
+    The single-nonlinear-mode synthesis adds its (linear) response to the mode's own, with its
+    phase (``synthesis.synthesize``): H_bg(W)[dof, :] f = sum_{k != j} row_k (Phi_k . f) /
+    (lam_k - W^2 + i W c_k) + static . f. Rigid-body modes (lam = 0) are kept: at W > 0 they are
+    the mass line of a free-free structure.
+
+    Attributes:
+        lam: (m,) eigenvalues of the linear base's kept modes, (rad/s)^2.
+        c: (m,) their modal damping coefficients (2 zeta_k omega_k), 1/s.
+        row: (m,) mode shapes at the DOF, Phi[dof, k], with the mode of interest set to 0.
+        Phi: (n, m) mass-normalized mode shapes (for the projection Phi^T f of a force), or the
+            rows of the forced DOFs only (:meth:`restrict`).
+        static: (n,) row ``dof`` of the static residual flexibility (zeros when every mode is
+            kept), mm/N; restricted like Phi.
+    """
+
+    lam: np.ndarray
+    c: np.ndarray
+    row: np.ndarray
+    Phi: np.ndarray = field(repr=False)
+    static: np.ndarray = field(repr=False)
+
+    def response(self, omega, force) -> np.ndarray:
+        """Complex first-harmonic response at the DOF to force cos(W t), x = Re(X e^{iWt}).
+
+        Args:
+            omega: excitation frequency W, rad/s (scalar or array).
+            force: (n,) force amplitude, N (the rows of ``Phi``).
+
+        Returns:
+            X, complex, mm, shaped like ``omega``.
+        """
+        F = np.asarray(force)
+        wgt = self.row * (self.Phi.T @ F)
+        W = np.asarray(omega, dtype=float)[..., None]
+        return np.sum(wgt / (self.lam - W * W + 1j * W * self.c), axis=-1) + self.static @ F
+
+    def restrict(self, dofs) -> "LinearBackground":
+        """The same background for forces on ``dofs`` only (the rows kept for a stored backbone)."""
+        d = np.asarray(dofs, dtype=int)
+        return LinearBackground(self.lam, self.c, self.row, self.Phi[d], self.static[d])
+
+
+@dataclass
 class Backbone:
     """A nonlinear mode sampled along the amplitude (p points).
 
@@ -129,6 +176,10 @@ class Backbone:
             slip, separation or closure, ``NonlinearModeProblem.onset_amplitude``); when it lies inside
             the requested range it is one of the points (n_points + 1 points then).
         wall_time: seconds.
+        displacement: (p,) complex first-harmonic response at ``dof`` (x = Re(X e^{i w t}), in
+            the phase of ``shape``), mm; its modulus is ``displacement_amplitude``.
+        background: the linear base's off-resonant receptance at ``dof``
+            (:class:`LinearBackground`), added by the synthesis.
     """
 
     mode: int
@@ -154,6 +205,17 @@ class Backbone:
     linear_zeta: float = float("nan")
     onset_amplitude: float = float("inf")
     wall_time: float = 0.0
+    displacement: np.ndarray | None = field(default=None, repr=False)
+    background: LinearBackground | None = field(default=None, repr=False)
+
+    def restrict(self, dofs) -> "Backbone":
+        """A copy whose ``shape`` (and background) keep only the columns ``dofs`` (``dof`` must be
+        one of them and is renumbered): enough to synthesize forces on those DOFs, small to store."""
+        d = [int(x) for x in dofs]
+        if self.dof not in d:
+            raise ValueError(f"dofs must contain the backbone's dof {self.dof}, got {d}")
+        return replace(self, shape=self.shape[:, d], dof=d.index(self.dof),
+                       background=None if self.background is None else self.background.restrict(d))
 
     @property
     def xi_work(self) -> np.ndarray:
@@ -253,6 +315,14 @@ class NonlinearModeProblem:
             sep = np.where(q > 0, np.abs(N0) / (c.kn * q), np.inf)
         a = np.where(N0 > 0, np.minimum(slip, sep), sep)
         return float(a.min())
+
+    def background(self, dof: int) -> LinearBackground:
+        """The base receptance at ``dof`` without the mode of interest (:class:`LinearBackground`)."""
+        G = self.hb.G
+        row = G.Phi[dof].copy()
+        row[self.j] = 0.0
+        static = np.zeros(self.hb.s.n) if G.complete else G.residual_row(dof)
+        return LinearBackground(G.lam.copy(), G.cvec.copy(), row, G.Phi, static)
 
     # ------------------------------------------------------------------ vector form (tests)
     def split(self, x: np.ndarray):
@@ -358,6 +428,7 @@ class NonlinearModeProblem:
         er = hb.element_results(Solution(w, None, hb.to_contact(U).copy(), 0.0, 0, 0))
         Wf = float(er.energy.sum())
         return dict(mass_amplitude=amass, displacement_amplitude=float(np.hypot(qd[1], qd[2])),
+                    displacement=complex(qd[1] - 1j * qd[2]),
                     kinetic=kin, viscous_energy=Wv, friction_energy=Wf, xi_viscous=xi_v,
                     zeta_energy=(Wf + Wv) / (4.0 * np.pi * kin), shape=G.Phi @ psi,
                     element_status=er.status, element_energy=er.energy)
@@ -442,4 +513,5 @@ def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40
                     iterations=np.array([r[6] for r in rows]),
                     linear_omega=float(np.sqrt(prob.lam_j)),
                     linear_zeta=prob.c_j / (2 * np.sqrt(prob.lam_j)), onset_amplitude=onset,
-                    wall_time=time.perf_counter() - t0)
+                    wall_time=time.perf_counter() - t0, displacement=col["displacement"],
+                    background=prob.background(int(dof)))

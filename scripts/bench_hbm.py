@@ -10,8 +10,14 @@ Prints markdown tables:
 3. Scaling: synthetic dense reduced structure (random orthogonal modes, a few low modes, n ~ 2100
    DOFs) with n_e friction elements, H = 3: setup, time per Newton iteration, per FRF curve through
    resonance, number of points, largest fraction of elements modeled nonlinearly.
+4. Backbones (EPMC, issue 15) on the synthetic structure (600 DOFs, 40 kept modes, 40 elements):
+   the cost of one backbone against the forced FRFs it replaces (one per level), with the
+   synthesized peaks' error against each FRF's peak; and speed against error of the backbone
+   over H x n_t (max relative error of omega and zeta at the same amplitudes against H = 7,
+   n_t = 512).
 
 Usage: OMP_NUM_THREADS=1 python scripts/bench_hbm.py [--quick] [--elements 10 40 160 340 680]
+       [--skip-jenkins] [--skip-scaling] [--skip-backbone] [--backbone-levels 80 300 1000]
 """
 from __future__ import annotations
 
@@ -153,6 +159,69 @@ def bench_scaling(elements, n, force, ds_max):
             f"{hb.stats['gmres_iterations']} |")
 
 
+def _frf_peak(hb, force, w_lo, w_hi):
+    """Largest point of a forced FRF, polished by Brent on the amplitude: (omega, amplitude, s)."""
+    from scipy.optimize import minimize_scalar
+    t = time.perf_counter()
+    fr = hb.frf(w_lo, w_hi, force, dof=0, max_points=2000)
+    k = int(np.argmax(fr.amplitude))
+    last = [fr.solutions[k]]
+
+    def neg(om):
+        last[0] = hb.solve(om, force, guess=last[0])
+        return -last[0].amplitude(0)
+    r = minimize_scalar(neg, bounds=(fr.omega[max(k - 1, 0)], fr.omega[min(k + 1, len(fr.omega) - 1)]),
+                        method="bounded", options={"xatol": 1e-9 * fr.omega[k]})
+    return r.x, -r.fun, time.perf_counter() - t, len(fr.omega)
+
+
+def bench_backbone(levels, Hs, nts, n=600, ne=40, n_points=40):
+    """Backbone cost vs the forced FRFs it replaces, and H x n_t speed against error."""
+    from hbm import synthesize
+    from hbm.nonlinear_mode import NonlinearModeProblem
+    s, c, f = synthetic(ne, n)
+    hb = HarmonicBalance(s, c, harmonics=3, samples=128)
+    w1 = np.sqrt(hb.G.lam[0])
+    on = NonlinearModeProblem(hb, 0).onset_amplitude()
+    amps = (0.3 * on, 300 * on)
+    say(f"\n### Backbone vs forced FRFs: synthetic structure, n = {n} DOFs, 40 kept modes, {ne} elements, "
+        f"H = 3, n_t = 128, response and force at DOF 0\n")
+    t = time.perf_counter()
+    bb = hb.nonlinear_mode(0, amps, dof=0, n_points=n_points)
+    t_bb = time.perf_counter() - t
+    say(f"Backbone: {bb.omega.size} points from 0.3x to 300x the slip onset ({bb.modal_amplitude[0]:.3g} to "
+        f"{bb.modal_amplitude[-1]:.3g} mm·t^0.5), {t_bb:.1f} s, {int(bb.iterations.sum())} Newton iterations.\n")
+    say("| level (N) | FRF points | FRF + polish (s) | FRF peak (rad/s) | FRF peak amp (mm) | "
+        "SNMS error f | SNMS error amp | mode-only error f | mode-only error amp | SNMS (ms) |")
+    say("|---|---|---|---|---|---|---|---|---|---|")
+    total = 0.0
+    for F in levels:
+        w, a, dt, npts = _frf_peak(hb, F * f, 0.9 * w1, 1.05 * w1)
+        total += dt
+        t = time.perf_counter()
+        sr = synthesize(bb, F * f)
+        ts = time.perf_counter() - t
+        s0 = synthesize(bb, F * f, background=False)
+        say(f"| {F:g} | {npts} | {dt:.1f} | {w:.4f} | {a:.5g} | {sr.peak_omega / w - 1:.1e} | "
+            f"{sr.peak_amplitude / a - 1:.1e} | {s0.peak_omega / w - 1:.1e} | {s0.peak_amplitude / a - 1:.1e} | "
+            f"{1e3 * ts:.0f} |")
+    say(f"\nOne backbone {t_bb:.1f} s against {len(levels)} FRFs {total:.1f} s.")
+    say(f"\n### Backbone speed against error (same structure; reference H = 7, n_t = 512; "
+        f"{n_points} points, 0.3x-300x onset)\n")
+    ref = HarmonicBalance(s, c, harmonics=7, samples=512).nonlinear_mode(0, amps, dof=0, n_points=n_points)
+    say("| H | n_t | backbone (s) | max error omega | max error zeta |")
+    say("|---|---|---|---|---|")
+    for H in Hs:
+        for nt in nts:
+            if nt < 2 * (2 * H + 1):
+                continue
+            t = time.perf_counter()
+            b = HarmonicBalance(s, c, harmonics=H, samples=nt).nonlinear_mode(0, amps, dof=0, n_points=n_points)
+            dt = time.perf_counter() - t
+            say(f"| {H} | {nt} | {dt:.1f} | {np.max(np.abs(b.omega / ref.omega - 1)):.1e} | "
+                f"{np.max(np.abs(b.zeta / ref.zeta - 1)):.1e} |")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--quick", action="store_true", help="small tables (H in 1,3; n_t in 64,128; n_e in 10,40)")
@@ -164,6 +233,9 @@ def main(argv=None):
                    help="interpreter with pyharm-os installed (skipped if missing)")
     p.add_argument("--skip-jenkins", action="store_true")
     p.add_argument("--skip-scaling", action="store_true")
+    p.add_argument("--skip-backbone", action="store_true")
+    p.add_argument("--backbone-levels", type=float, nargs="+", default=[80.0, 300.0, 1000.0],
+                   help="synthetic structure's levels for the backbone vs FRF table, N")
     a = p.parse_args(argv)
     Hs, nts = ([1, 3], [64, 128]) if a.quick else ([1, 3, 5, 7], [32, 64, 128, 256])
     elements = [10, 40] if a.quick else a.elements
@@ -171,6 +243,9 @@ def main(argv=None):
         bench_jenkins(Hs, nts, a.pyharm_python)
     if not a.skip_scaling:
         bench_scaling(elements, max(a.dofs, 3 * max(elements) + 20), a.force, a.ds_max)
+    if not a.skip_backbone:
+        bench_backbone(a.backbone_levels, [1, 3] if a.quick else [1, 3, 5],
+                       [64, 128] if a.quick else [32, 64, 128, 256])
 
 
 if __name__ == "__main__":

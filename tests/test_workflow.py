@@ -71,6 +71,8 @@ def test_summary_equals_the_recorded_reference(run: Path) -> None:
     ref = json.loads((DATA / "e2e_summary.json").read_text())
     bad = []
     for rel, path, a, b in differences(ref, _summary(run)):
+        if a == "<missing>":
+            continue       # a key newer than the recorded reference: nothing to compare it with
         tol = next((t for frag, t in REF_TOLERANCES if frag in path), REF_RTOL)
         if tol is not None and rel > tol:
             bad.append((rel, path, a, b))
@@ -285,9 +287,69 @@ def test_v3_local_peak_search_matches_full_sweep(run: Path) -> None:
 def test_report_written(run: Path) -> None:
     text = (run / "report.md").read_text()
     for fig in ("frf_configurations", "frf_roughness", "pressure_morphology", "stiffness_maps",
-                "status_energy", "hysteresis_loops", "keq_contact_fraction"):
+                "status_energy", "hysteresis_loops", "keq_contact_fraction",
+                "backbone_frequency", "backbone_damping"):
         assert (run / "figures" / f"{fig}.png").stat().st_size > 1000
         assert f"figures/{fig}.png" in text
+
+
+def test_backbones_predict_the_forced_peaks(run: Path) -> None:
+    """Issue 15: the peak synthesized from each joint's backbone (SNMS + off-resonant background)
+    against the forced FRF's polished peak at every level the study swept: frequency within
+    0.2 %, amplitude within 5 %, for baseline, v1 and v3 on every surface (measured on the quick
+    preset: <= 1.8e-4 and <= 6.1e-3)."""
+    s = _summary(run)
+    bbs = s["backbones"]
+    assert sorted(bbs) == ["baseline", "v1", "v3-rq1", "v3-rq15"]
+    compared = 0
+    for name, v in bbs.items():
+        for lvl, r in v["snms_vs_forced"].items():
+            if r["forced_hz"] is None:
+                continue
+            assert r["snms_hz"] == pytest.approx(r["forced_hz"], rel=2e-3), (name, lvl)
+            assert r["snms_amplitude"] == pytest.approx(r["forced_amplitude"], rel=5e-2), (name, lvl)
+            # the table's forced peak is the study's curve
+            assert r["forced_hz"] == s["peaks"][f"{name}@{lvl}"]["peak_hz"]
+            compared += 1
+    assert compared == 3 + 3 + 3 + 1        # baseline, v1, v3 Rq 15 at 3 levels, v3 Rq 1 at L1
+
+
+def test_backbone_files_energy_balance_and_linear_limit(run: Path) -> None:
+    """Each stored backbone: the work of the EPMC damping per cycle equals the friction + viscous
+    dissipation at every point (Galerkin balance, to the Newton tolerance); its first point is
+    the study's stuck mode (dense eigh of the stuck structure, an independent computation) with
+    the case's modal damping; the tmdsimpy CSV holds the same numbers; the stored (restricted)
+    backbone synthesizes the stored peaks again; zeta doubles inside the range."""
+    from hbm import synthesize
+    from fe_joint.study.artifacts import load_backbones
+    case = load_case(preset="quick")
+    s = _summary(run)
+    dyn = json.loads((run / "stages" / "dynamics.json").read_text())["summary"]
+    bbs = load_backbones(run / "dynamics")
+    assert len(bbs) == 4
+    for key, br in bbs.items():
+        work = br.xi * 2 * np.pi / br.omega * br.kinetic
+        diss = br.friction_energy + br.viscous_energy
+        assert np.max(np.abs(work / diss - 1)) <= 1e-6, key
+        assert br.zeta_energy == pytest.approx(br.zeta, rel=1e-6)
+        f_stuck = (s["stuck_frequency_hz"][key.config] if key.config != "v3"
+                   else dyn["v3"][key.name]["f_lin"])
+        assert br.frequency_hz[0] == pytest.approx(f_stuck, rel=1e-6), key
+        assert br.zeta[0] == pytest.approx(case.reduction.damping_ratio, rel=1e-9)
+        assert np.all(br.element_status[0] == np.where(br.element_status[0] == 4, 4, 0))
+        assert np.isfinite(br.zeta_doubled_amplitude)
+        assert br.displacement_amplitude[0] < br.zeta_doubled_amplitude < br.displacement_amplitude[-1]
+        csv = np.genfromtxt(run / "dynamics" / "backbones" / f"{key.name}.csv", delimiter=",",
+                            names=True)
+        assert csv.dtype.names == ("modal_amplitude", "displacement_amplitude",
+                                   "frequency_rad_per_s", "damping_factor_frac_crit")
+        assert np.allclose(csv["frequency_rad_per_s"], br.omega, rtol=1e-11)
+        assert np.allclose(csv["damping_factor_frac_crit"], br.zeta, rtol=1e-11)
+        bb = br.backbone()
+        for i, lv in enumerate(br.levels):
+            sr = synthesize(bb, np.array([lv, 0.0]))
+            assert sr.peak_omega / (2 * np.pi) == pytest.approx(br.snms_hz[i], rel=1e-9)
+            assert sr.peak_amplitude == pytest.approx(br.snms_amplitude[i], rel=1e-9)
 
 
 MPI_CASE = """

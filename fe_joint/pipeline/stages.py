@@ -17,7 +17,7 @@ from ..model.reduced_model import ReducedModel
 from ..study import contact as ms
 from ..study import variants
 from ..study import jobs as study
-from ..study.artifacts import (CurveKey, load_artifact, load_curves, read_json_artifact,
+from ..study.artifacts import (CurveKey, load_artifact, load_backbones, load_curves, read_json_artifact,
                                rq_label, v3_pass0_file)
 from ..study.configurations import choose_levels, fixed_joints, joint_baseline
 from ..study.frf import CurveResult, SweepSettings
@@ -191,10 +191,14 @@ def stage_dynamics(ctx: StageContext) -> dict:
     ctx.print(f"[fe-joint] dynamics: levels {', '.join(f'{x:.3g}' for x in levels)} N "
               f"(macroslip estimate {level_info['macroslip']:.3g} N), {len(todo)} of "
               f"{len(every)} jobs to run ({len(every) - len(todo)} cached)")
+    # the backbones need the v3 fixed points' converged k and the forced peaks' amplitudes:
+    # they run after the FRF jobs, on the same queue (a few seconds each: not cached per job,
+    # they rerun whenever the dynamics stage runs)
+    bb_jobs = study.backbone_jobs(c)
     bar = None
     if ctx.rank == 0 and ctx.progress and todo:
         from tqdm import tqdm
-        bar = tqdm(total=len(todo), desc="dynamics", unit="job")
+        bar = tqdm(total=len(todo) + len(bb_jobs), desc="dynamics", unit="job")
     tick = (lambda job: bar.update(1)) if bar is not None else None
 
     def run(inputs, jobs):
@@ -205,9 +209,11 @@ def stage_dynamics(ctx: StageContext) -> dict:
     if any(j.name in names for j in later):
         inp.v3_out = _v3_outputs(folder, later, ctx.comm)
         run(inp, later)
+    run_jobs(lambda job: study.run_backbone_job(inp, folder, job), study.write_backbone_job,
+             bb_jobs, folder, ctx.comm, tick, skip_done=False)
     if bar is not None:
         bar.close()
-    ctx.files["dynamics"] = [folder / f for j in every for f in j.files]
+    ctx.files["dynamics"] = [folder / f for j in every + bb_jobs for f in j.files]
     summary: dict = {"levels": levels, "level_info": level_info, "f_lin": f_lin, "curves": {},
                      "v3": {}}
     if ctx.rank == 0:
@@ -216,6 +222,10 @@ def stage_dynamics(ctx: StageContext) -> dict:
         for j in first:
             if j.kind == "v3":
                 summary["v3"][j.name] = read_json_artifact(folder / f"{j.name}.json")
+        summary["backbones"] = {k.name: {"seconds": br.seconds, "points": int(br.omega.size),
+                                         "snms_hz": br.snms_hz.tolist(),
+                                         "snms_amplitude": br.snms_amplitude.tolist()}
+                                for k, br in load_backbones(folder).items()}
         t = curves[CurveKey("baseline", None)]
         summary["linear_peak_rel_error"] = abs(t.peak_hz - f_lin["baseline"]) / f_lin["baseline"]
         warn = []

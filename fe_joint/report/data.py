@@ -6,7 +6,7 @@ never from the solvers, so the report runs without dolfinx, PETSc or the HBM sol
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +14,8 @@ import numpy as np
 from ..case import Case
 from ..model.reduced_model import ReducedModel
 from ..pipeline.runner import read_manifest
-from ..study.artifacts import CurveKey, load_artifact, load_curves, read_json_artifact, v3_job_name
+from ..study.artifacts import (BackboneKey, CurveKey, load_artifact, load_backbones, load_curves,
+                               read_json_artifact, v3_job_name)
 from ..study.contact import SurfaceContact, load_surfaces
 from ..study.frf import CurveResult
 
@@ -47,6 +48,7 @@ class ReportData:
         speed: the speed-against-error tables, None when the file is missing.
         seeds: the contact stage's seed statistics (``contact/seeds.json``), None if missing.
         hardness: the hardness-capped sweep (``contact/hardness.json``), None if missing.
+        backbones: every finished backbone of ``dynamics/backbones/`` ({} for a run without).
     """
     out: Path
     case: Case
@@ -61,6 +63,7 @@ class ReportData:
     speed: dict | None
     seeds: dict | None = None
     hardness: dict | None = None
+    backbones: dict = field(default_factory=dict)
 
     @property
     def dynamics(self) -> dict:
@@ -118,6 +121,13 @@ class ReportData:
         """(ne,) tributary areas of the friction elements, mm²."""
         return np.asarray(self.rm.pair_area)
 
+    def backbone_curves(self, key: BackboneKey) -> dict:
+        """The forced curves of a backbone's joint, {level index: CurveResult} (v3: on its
+        surface)."""
+        return {k.level_index: cr for k, cr in self.curves.items()
+                if k.config == key.config and k.level_index is not None
+                and (key.config != "v3" or k.rq_um == key.rq_um)}
+
     def curve(self, config: str, level_index: int) -> CurveResult | None:
         """The FRF of a configuration at a level (v3: on the comparison surface), None if absent."""
         rq = self.v_rq if config == "v3" else None
@@ -166,4 +176,5 @@ def load_report_data(out: Path, case: Case) -> ReportData:
         v3_records=records, v3_arrays=arrays,
         speed=_read_json(out / "speed" / "speed_error.json"),
         seeds=_read_json(out / "contact" / "seeds.json"),
-        hardness=_read_json(out / "contact" / "hardness.json"))
+        hardness=_read_json(out / "contact" / "hardness.json"),
+        backbones=load_backbones(out / "dynamics"))

@@ -309,7 +309,15 @@ FIGURES: dict[str, Callable[[ReportData, Path], Path | None]] = {
     "status_energy": status_energy,
     "hysteresis_loops": hysteresis_loops,
     "keq_contact_fraction": keq_contact_fraction,
+    "backbone_frequency": lambda data, path: _backbones().backbone_frequency(data, path),
+    "backbone_damping": lambda data, path: _backbones().backbone_damping(data, path),
 }
+
+
+def _backbones():
+    # imported when drawn: report.backbones imports this module's helpers
+    from . import backbones
+    return backbones
 
 
 def draw_figures(data: ReportData, folder: Path) -> list[Path]:

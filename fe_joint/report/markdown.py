@@ -5,6 +5,7 @@ import numpy as np
 
 from ..model.interface_motion import RIGID_NAMES
 from ..study.artifacts import rq_label
+from . import backbones
 from .data import PAPER, ReportData
 
 
@@ -158,6 +159,7 @@ def _cost(s: dict) -> list[str]:
     L += [f"| {k} | {v:.1f} |" for k, v in s["timings_s"]["stages"].items()]
     L += ["", "| FRF curve | points | wall time [s] |", "|---|---|---|"]
     L += [f"| {k} | {v['n_points']} | {v['seconds']:.1f} |" for k, v in s["peaks"].items()]
+    L += backbones.cost_rows(s)
     L += ["", "The paper's FORSE curves took 13 682 s (smooth, 1000 N) and 6 957 / 6 362 / 6 031 / 5 954 s "
           "(Rq 1 / 5 / 10 / 15 µm) on a 20-core node; its BEM analyses are in its Table 3."]
     return L
@@ -193,7 +195,7 @@ def report_markdown(data: ReportData, summary: dict) -> str:
          + _damping(data, summary) + _contact(data, summary) + _contact_area(data, summary)
          + _seeds(data, summary) + _hardness(data, summary) + _state_figures()
          + _joint_state(summary) + _interface_motion(summary)
-         + _v3(summary) + _cost(summary) + _speed(data.speed))
+         + _v3(summary) + backbones.markdown(data, summary) + _cost(summary) + _speed(data.speed))
     return "\n".join(L) + "\n"
 
 

@@ -11,6 +11,7 @@ from .damping import damping_by_curve, slip_onsets
 from .joint_state import interface_motions, joint_shear, stuck_modes_by_configuration
 from ..study.artifacts import rq_label, v3_job_name
 from ..study.frf import CurveResult
+from .backbones import backbones_section
 from .data import STAGES_READ, ReportData
 from .stiffness import configuration_joints, k_eq_table, rq_joints
 
@@ -118,6 +119,8 @@ def build_summary(data: ReportData) -> dict:
         summary["seeds"] = seed_statistics(data)
     if data.hardness:
         summary["hardness_variant"] = data.hardness
+    if data.backbones:
+        summary["backbones"] = backbones_section(data)
     if data.speed:
         summary["speed_vs_error"] = data.speed
     return summary

@@ -240,3 +240,44 @@ def digest(*parts) -> str:
 def read_json_artifact(path: Path) -> dict:
     """A JSON artifact; a missing or broken one raises ArtifactError naming ``path``."""
     return load_artifact(path, lambda p: json.loads(Path(p).read_text()))
+
+#: the dynamics subfolder of the backbones (kept apart from the curves, which ``load_curves``
+#: reads from every ``dynamics/*.npz``)
+BACKBONE_DIR = "backbones"
+
+
+@dataclass(frozen=True)
+class BackboneKey:
+    """Which nonlinear mode (backbone) a file holds.
+
+    Attributes:
+        config: configuration ('baseline', 'smooth-ms', 'v1', 'v2', 'v3').
+        rq_um: Rq of the surface behind a v3 joint, µm (None for the fixed configurations).
+    """
+    config: str
+    rq_um: float | None = None
+
+    @property
+    def name(self) -> str:
+        """File stem and summary label, e.g. ``baseline``, ``v3-rq10``."""
+        return self.config if self.rq_um is None else f"{self.config}-rq{rq_label(self.rq_um)}"
+
+    def to_fields(self) -> dict:
+        """The key as text and a number to store inside a backbone file (NaN for None)."""
+        return {"config": self.config, "rq_um": math.nan if self.rq_um is None else float(self.rq_um)}
+
+    @classmethod
+    def from_fields(cls, config: str, rq_um: float) -> "BackboneKey":
+        """Inverse of :meth:`to_fields`."""
+        return cls(str(config), None if math.isnan(float(rq_um)) else float(rq_um))
+
+
+def load_backbones(folder: Path) -> dict:
+    """Every finished backbone of a dynamics folder: {BackboneKey: BackboneResult}, keys read
+    from the files (``folder/backbones/*.npz``)."""
+    from .backbone import BackboneResult
+    out = {}
+    for f in sorted((Path(folder) / BACKBONE_DIR).glob("*.npz")):
+        br = BackboneResult.load(f)
+        out[br.key] = br
+    return out

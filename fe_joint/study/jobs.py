@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from ..model.joint import JointModel
-from .artifacts import (CurveKey, check_files, digest, file_record, load_artifact, v3_job_name,
-                        v3_pass0_file)
+from .artifacts import (BACKBONE_DIR, BackboneKey, CurveKey, check_files, digest, file_record,
+                        load_artifact, load_curves, v3_job_name, v3_pass0_file)
 from .contact import InterfaceSetup
 from .fixed_point import run_v3
 from .frf import CurveResult, SweepSettings, frf
@@ -58,7 +58,8 @@ class Job:
     Attributes:
         kind: "curve" (a fixed configuration's FRF), "v3" (a fixed point), "v3-level" (the
             converged v3 joint of ``rq_um`` at another level) or "v2-pass0" (the pass-0 FRF of
-            the v3 fixed point on ``rq_um``, kept as the v2 curve).
+            the v3 fixed point on ``rq_um``, kept as the v2 curve) or "backbone" (the nonlinear
+            mode of a fixed configuration, or of v3 on surface ``rq_um``).
         config: configuration name.
         level_index: index into the study's levels (None: the small-excitation check).
         rq_um: the surface of a v3 fixed point, µm.
@@ -75,11 +76,15 @@ class Job:
         """File stem of the job's record (e.g. ``baseline@L1``, ``v3-rq10``, ``v3-rq10@L0``)."""
         if self.kind == "v3":
             return v3_job_name(self.rq_um)
+        if self.kind == "backbone":
+            return f"{BACKBONE_DIR}/{BackboneKey(self.config, self.rq_um).name}"
         return self.curve_keys[0].name
 
     @property
     def curve_keys(self) -> list[CurveKey]:
-        """The study curves this job writes."""
+        """The study curves this job writes (none for a backbone)."""
+        if self.kind == "backbone":
+            return []
         if self.kind in ("v3", "v3-level"):
             return [CurveKey("v3", self.level_index, self.rq_um)]
         return [CurveKey(self.config, self.level_index)]
@@ -87,6 +92,8 @@ class Job:
     @property
     def files(self) -> list[str]:
         """Every file the job writes into the dynamics folder, its marker ``<name>.json`` last."""
+        if self.kind == "backbone":
+            return [f"{self.name}.npz", f"{self.name}.csv", f"{self.name}.json"]
         out = [f"{k.name}.npz" for k in self.curve_keys]
         if self.kind == "v3":
             out += [f"{self.name}.arrays.npz", v3_pass0_file(self.rq_um)]
