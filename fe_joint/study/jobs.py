@@ -325,3 +325,69 @@ def plan_jobs(folder: Path, jobs: list[Job], say=print) -> list[Job]:
     for job, r in loaded:
         write_job(folder, job, r)
     return todo
+
+
+def v3_surfaces(case) -> list[float]:
+    """The Rq (µm) of every v3 fixed point of the study (the sweep, and the comparison surface
+    when v3 is compared), ascending."""
+    d, r = case.dynamics, case.roughness
+    return sorted(set(r.rq_um) | ({r.v_rq_um} if "v3" in d.configurations else set()))
+
+
+def backbone_jobs(case) -> list[Job]:
+    """One backbone per fixed configuration and per v3 surface, v3 first (they need the v3 fixed
+    points' converged stiffnesses, so they run after the FRF jobs: :func:`run_backbone_job`)."""
+    out = [Job(kind="backbone", config="v3", level_index=None, rq_um=rq) for rq in v3_surfaces(case)]
+    out += [Job(kind="backbone", config=c, level_index=None)
+            for c in case.dynamics.configurations if c != "v3"]
+    return out
+
+
+def backbone_plan(inp: StudyInputs, folder: Path, job: Job):
+    """The joint, its stuck frequency (Hz) and the top-level peak amplitude (mm) a backbone job
+    needs, from the finished FRF and v3 jobs in ``folder``.
+
+    The amplitude is the peak of the joint's forced curve at the highest level it was swept at,
+    scaled linearly to the top level (a v3 surface off the comparison has only its middle-level
+    curve): friction damping makes the real growth slower, so this covers the top level's peak.
+    """
+    top = inp.levels[-1]
+    if job.config == "v3":
+        rec = json.loads((folder / f"{v3_job_name(job.rq_um)}.json").read_text())
+        with np.load(folder / f"{v3_job_name(job.rq_um)}.arrays.npz") as a:
+            kn, kt = a["kn"], a["kt"]
+        sc = inp.surfaces[job.rq_um]
+        joint = JointModel("v3", n0=sc.n0, gap=sc.gap_el, kn=kn, kt=kt, area=inp.setup.area,
+                           rq_um=job.rq_um)
+        f_lin = float(rec["f_lin"])
+    else:
+        joint, f_lin = inp.joints[job.config], float(inp.f_lin[job.config])
+    curves = [cr for k, cr in load_curves(folder).items()
+              if k.config == job.config and k.level_index is not None
+              and (k.rq_um == job.rq_um if job.config == "v3" else True)]
+    if not curves:
+        raise ValueError(f"backbone of {job.name}: no forced curve of that joint in {folder}")
+    hi = max(curves, key=lambda cr: cr.level)
+    return joint, f_lin, hi.peak_amplitude * top / hi.level
+
+
+def run_backbone_job(inp: StudyInputs, folder: Path, job: Job) -> dict:
+    """Run one backbone job; returns {"backbone": BackboneResult}."""
+    from .backbone import compute_backbone
+    joint, f_lin, a_top = backbone_plan(inp, folder, job)
+    key = BackboneKey(job.config, job.rq_um)
+    return {"backbone": compute_backbone(key, inp.rm, joint, f_lin, a_top, inp.levels,
+                                         inp.settings)}
+
+
+def write_backbone_job(folder: Path, job: Job, r: dict) -> None:
+    """Write a finished backbone (rank 0): ``backbones/<name>.npz``, ``.csv`` and the ``.json``
+    record last (it marks the job done)."""
+    br = r["backbone"]
+    sub = folder / BACKBONE_DIR
+    sub.mkdir(exist_ok=True)
+    br.save(folder / f"{job.name}.npz")
+    br.write_csv(folder / f"{job.name}.csv")
+    (folder / f"{job.name}.json").write_text(json.dumps(
+        {"job": {**job.__dict__, "name": job.name}, "seconds": br.seconds,
+         "points": int(br.omega.size), "newton_iterations": br.newton_iterations}, default=float))
