@@ -615,7 +615,7 @@ class HarmonicBalance:
 
     def nonlinear_mode(self, mode: int, amplitudes: tuple[float, float], dof: int, *,
                        n_points: int = 40, tol: float | None = None, max_iter: int | None = None,
-                       max_halvings: int = 8):
+                       max_halvings: int = 8, partial: bool = False):
         """Nonlinear mode (EPMC backbone) by continuation in log amplitude
         (``nonlinear_mode.continue_backbone``; the formulation is in that module's docstring).
 
@@ -627,10 +627,12 @@ class HarmonicBalance:
             n_points: log-spaced points from a0 to a1 (>= 2).
             tol, max_iter: Newton settings (default: this solver's).
             max_halvings: step halvings allowed between two output points.
+            partial: when a step cannot be completed, return the points reached so far
+                (``Backbone.complete`` False) instead of raising.
 
         Returns:
-            Backbone (ConvergenceError if a step cannot be completed).
+            Backbone (ConvergenceError if a step cannot be completed and not ``partial``).
         """
         from .nonlinear_mode import continue_backbone
         return continue_backbone(self, mode, amplitudes, dof, n_points=n_points, tol=tol,
-                                 max_iter=max_iter, max_halvings=max_halvings)
+                                 max_iter=max_iter, max_halvings=max_halvings, partial=partial)

@@ -180,6 +180,8 @@ class Backbone:
             the phase of ``shape``), mm; its modulus is ``displacement_amplitude``.
         background: the linear base's off-resonant receptance at ``dof``
             (:class:`LinearBackground`), added by the synthesis.
+        complete: False when the continuation stopped before a1 (``partial=True``); the points
+            are then those up to the last converged amplitude, and ``stop_reason`` says why.
     """
 
     mode: int
@@ -205,6 +207,8 @@ class Backbone:
     linear_zeta: float = float("nan")
     onset_amplitude: float = float("inf")
     wall_time: float = 0.0
+    complete: bool = True
+    stop_reason: str = ""
     displacement: np.ndarray | None = field(default=None, repr=False)
     background: LinearBackground | None = field(default=None, repr=False)
 
@@ -436,14 +440,15 @@ class NonlinearModeProblem:
 
 def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40,
                       tol: float | None = None, max_iter: int | None = None,
-                      max_halvings: int = 8) -> Backbone:
+                      max_halvings: int = 8, partial: bool = False) -> Backbone:
     """Natural-parameter continuation of the nonlinear mode in log amplitude (secant predictor).
 
     The backbone is a function of the amplitude, so the amplitude is the parameter: output points
     at ``n_points`` log-spaced modal amplitudes from a0 to a1; the first starts from the linear
     stuck mode, each next one from the secant through the last two points in log a (of U/a, w and
     xi). A failed Newton halves the step in log a (intermediate points are not reported), at most
-    ``max_halvings`` times in a row.
+    ``max_halvings`` times in a row; then the continuation raises ConvergenceError, or with
+    ``partial`` returns the points reached so far (``complete`` False, at least two points).
 
     Args: see ``HarmonicBalance.nonlinear_mode``.
 
@@ -472,9 +477,10 @@ def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40
     U, w, xi, res, it, g, nl = prob.solve(a0, U, w, xi)
     hist = [(a0, U / a0, w, xi)]
     rows = [(a0, U, w, xi, g, res, it)]
+    stop = ""
     for at in targets[1:]:
         halvings = 0
-        while True:
+        while not stop:
             ac, Uc, wc, xc = hist[-1]
             a_try = ac * (at / ac) ** (0.5 ** halvings)
             if len(hist) > 1:
@@ -488,14 +494,18 @@ def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40
             except ConvergenceError as err:
                 halvings += 1
                 if halvings > max_halvings:
-                    raise ConvergenceError(f"nonlinear mode: no step from modal amplitude {ac:.6g} "
-                                           f"towards {at:.6g} after {max_halvings} halvings",
-                                           err.residual) from err
+                    msg = (f"nonlinear mode: no step from modal amplitude {ac:.6g} towards "
+                           f"{at:.6g} after {max_halvings} halvings")
+                    if not partial or len(rows) < 2:
+                        raise ConvergenceError(msg, err.residual) from err
+                    stop = f"{msg} (residual reached: {err.residual:.3g})"
                 continue
             hist = hist[-1:] + [(a_try, U / a_try, w, xi)]
             if a_try == at:
                 break
             halvings = max(halvings - 1, 0)
+        if stop:
+            break
         rows.append((at, U, w, xi, g, res, it))
     pts = [prob.point(a, U, w, xi, g, int(dof)) for a, U, w, xi, g, _, _ in rows]
     col = {k: np.array([p[k] for p in pts]) for k in pts[0]}
@@ -513,5 +523,6 @@ def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40
                     iterations=np.array([r[6] for r in rows]),
                     linear_omega=float(np.sqrt(prob.lam_j)),
                     linear_zeta=prob.c_j / (2 * np.sqrt(prob.lam_j)), onset_amplitude=onset,
-                    wall_time=time.perf_counter() - t0, displacement=col["displacement"],
+                    wall_time=time.perf_counter() - t0, complete=not stop, stop_reason=stop,
+                    displacement=col["displacement"],
                     background=prob.background(int(dof)))

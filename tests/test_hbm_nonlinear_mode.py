@@ -271,3 +271,31 @@ def test_snms_with_off_resonant_background_on_a_synthetic_structure():
         # the elements' slip onsets are 40 corners); the mode alone is 1.7e-3 / 3.6e-3 off
         assert abs(sr.peak_omega / w_pk - 1) <= 3e-4
         assert abs(sr.peak_amplitude / a_pk - 1) <= 1e-2
+
+
+def test_partial_backbone_keeps_the_points_reached(monkeypatch):
+    """A step Newton cannot complete (even after halvings) raises, or with partial=True ends the
+    backbone at the last converged amplitude, flagged incomplete; the study warns about it."""
+    from hbm.errors import ConvergenceError
+    from hbm.nonlinear_mode import NonlinearModeProblem
+    from fe_joint.pipeline.guards import backbone_guard
+    hb = jenkins_1dof(1, 256)
+    full = hb.nonlinear_mode(0, (0.05, 20.0), dof=0, n_points=12)
+    a_max = 1.0
+    solve = NonlinearModeProblem.solve
+
+    def failing(self, a, *args, **kw):
+        if a > a_max:
+            raise ConvergenceError("test: no convergence above 1", 1.0)
+        return solve(self, a, *args, **kw)
+    monkeypatch.setattr(NonlinearModeProblem, "solve", failing)
+    with pytest.raises(ConvergenceError, match="halvings"):
+        hb.nonlinear_mode(0, (0.05, 20.0), dof=0, n_points=12)
+    part = hb.nonlinear_mode(0, (0.05, 20.0), dof=0, n_points=12, partial=True)
+    assert full.complete and not part.complete and "halvings" in part.stop_reason
+    keep = full.modal_amplitude <= a_max
+    assert part.modal_amplitude.size == keep.sum() >= 2
+    assert np.allclose(part.omega, full.omega[keep], rtol=1e-10)
+    w = backbone_guard("v1", part.complete, float(part.displacement_amplitude[-1]), part.stop_reason)
+    assert len(w) == 1 and w[0].kind == "backbone-incomplete" and w[0].value <= a_max * 1.01
+    assert backbone_guard("v1", True, 1.0, "") == []

@@ -175,6 +175,8 @@ def test_warnings_list_the_suspect_results(run: Path) -> None:
         n for n, v in s["v3"].items() if not v["converged"])
     assert sorted(by_kind.get("unstable", [])) == sorted(
         n for n, c in dyn["curves"].items() if c["unstable_points"] > 0)
+    assert sorted(by_kind.get("backbone-incomplete", [])) == sorted(
+        n for n, b in s["backbones"].items() if not b["complete"])
     assert s["reduced_vs_full_max_rel_error"] < 1e-3 and "cutoff" not in by_kind
     assert max(s["levels_over_macroslip"]) < 1 and "gross-slip" not in by_kind
     head = (run / "report.md").read_text().split("## ")[0]
@@ -301,17 +303,25 @@ def test_backbones_predict_the_forced_peaks(run: Path) -> None:
     s = _summary(run)
     bbs = s["backbones"]
     assert sorted(bbs) == ["baseline", "v1", "v3-rq1", "v3-rq15"]
-    compared = 0
+    compared, beyond = 0, 0
     for name, v in bbs.items():
         for lvl, r in v["snms_vs_forced"].items():
             if r["forced_hz"] is None:
+                continue
+            if r["snms_hz"] is None or not np.isfinite(r["snms_hz"]):
+                # only a backbone that stopped early (warned about) may miss a peak, and only one
+                # beyond its last amplitude
+                assert not v["complete"] and r["forced_amplitude"] > v["amplitude_mm"][-1], (name, lvl)
+                beyond += 1
                 continue
             assert r["snms_hz"] == pytest.approx(r["forced_hz"], rel=2e-3), (name, lvl)
             assert r["snms_amplitude"] == pytest.approx(r["forced_amplitude"], rel=5e-2), (name, lvl)
             # the table's forced peak is the study's curve
             assert r["forced_hz"] == s["peaks"][f"{name}@{lvl}"]["peak_hz"]
             compared += 1
-    assert compared == 3 + 3 + 3 + 1        # baseline, v1, v3 Rq 15 at 3 levels, v3 Rq 1 at L1
+    # baseline, v1, v3 Rq 15 at 3 levels, v3 Rq 1 at L1; with the 4th-order march v1's
+    # continuation stops before its top-level peak (issue 15: a step Newton could not complete)
+    assert compared + beyond == 3 + 3 + 3 + 1 and beyond <= 2
 
 
 def test_backbone_files_energy_balance_and_linear_limit(run: Path) -> None:
@@ -337,8 +347,11 @@ def test_backbone_files_energy_balance_and_linear_limit(run: Path) -> None:
         assert br.frequency_hz[0] == pytest.approx(f_stuck, rel=1e-6), key
         assert br.zeta[0] == pytest.approx(case.reduction.damping_ratio, rel=1e-9)
         assert np.all(br.element_status[0] == np.where(br.element_status[0] == 4, 4, 0))
-        assert np.isfinite(br.zeta_doubled_amplitude)
-        assert br.displacement_amplitude[0] < br.zeta_doubled_amplitude < br.displacement_amplitude[-1]
+        if br.complete:      # (a backbone that stopped early may end before ζ doubles)
+            assert np.isfinite(br.zeta_doubled_amplitude)
+        if np.isfinite(br.zeta_doubled_amplitude):
+            assert (br.displacement_amplitude[0] < br.zeta_doubled_amplitude
+                    < br.displacement_amplitude[-1])
         csv = np.genfromtxt(run / "dynamics" / "backbones" / f"{key.name}.csv", delimiter=",",
                             names=True)
         assert csv.dtype.names == ("modal_amplitude", "displacement_amplitude",
@@ -348,8 +361,10 @@ def test_backbone_files_energy_balance_and_linear_limit(run: Path) -> None:
         bb = br.backbone()
         for i, lv in enumerate(br.levels):
             sr = synthesize(bb, np.array([lv, 0.0]))
-            assert sr.peak_omega / (2 * np.pi) == pytest.approx(br.snms_hz[i], rel=1e-9)
-            assert sr.peak_amplitude == pytest.approx(br.snms_amplitude[i], rel=1e-9)
+            assert sr.in_range == np.isfinite(br.snms_hz[i])
+            if sr.in_range:
+                assert sr.peak_omega / (2 * np.pi) == pytest.approx(br.snms_hz[i], rel=1e-9)
+                assert sr.peak_amplitude == pytest.approx(br.snms_amplitude[i], rel=1e-9)
 
 
 MPI_CASE = """

@@ -38,7 +38,7 @@ class RunWarning:
     """One suspect result.
 
     Attributes:
-        kind: "cutoff", "gross-slip", "v3-unconverged" or "unstable".
+        kind: "cutoff", "gross-slip", "v3-unconverged", "unstable" or "backbone-incomplete".
         subject: what it is about (a curve or job name, a case key).
         message: one line for the console and the report.
         value: the number behind it (relative error, level / estimate, change, unstable points).
@@ -175,3 +175,12 @@ def done_line(out, warnings: list[RunWarning], report: bool = True) -> str:
     s = "" if len(warnings) == 1 else "s"
     where = f"{out}/report.md" if report else f"{out}/stages/*.json"
     return f"[fe-joint] done with {len(warnings)} warning{s}: {text}; details in {where}"
+
+
+def backbone_guard(name: str, complete: bool, reached: float, reason: str) -> list[RunWarning]:
+    """A backbone whose continuation stopped before its top amplitude (``reached``: its last
+    response amplitude, mm); the synthesized peaks beyond it are NaN."""
+    if complete:
+        return []
+    return [RunWarning("backbone-incomplete", name,
+                       f"backbone {name} stops at {reached:.4g} mm ({reason})", reached, None)]

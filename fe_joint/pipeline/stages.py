@@ -233,6 +233,9 @@ def stage_dynamics(ctx: StageContext) -> dict:
             warn += guards.v3_guard(name, rec, c.contact.kt_tol)
         for k, cr in curves.items():
             warn += guards.unstable_guard(k.name, cr.omega_hz, cr.stable)
+        for k, br in load_backbones(folder).items():
+            warn += guards.backbone_guard(k.name, br.complete, float(br.displacement_amplitude[-1]),
+                                          br.stop_reason)
         summary["warnings"] = [w.to_dict() for w in warn]
     if ctx.comm is not None:
         summary = ctx.comm.bcast(summary, root=0)

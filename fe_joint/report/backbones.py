@@ -56,7 +56,8 @@ def backbones_section(data: ReportData) -> dict:
     Returns:
         {name: {amplitude_mm (response DOF), modal_amplitude (‖η₁‖, mm·t^0.5), frequency_hz,
         zeta, linear_hz, linear_zeta, zeta_doubled_amplitude_mm, zeta_doubled_modal_amplitude
-        (None when ζ never doubles), snms_vs_forced (:func:`snms_rows`), points, seconds}}.
+        (None when ζ never doubles), snms_vs_forced (:func:`snms_rows`), points, seconds,
+        complete (False: the continuation stopped early, see the run's warnings)}}.
     """
     def num(x):
         return None if not np.isfinite(x) else float(x)
@@ -70,7 +71,7 @@ def backbones_section(data: ReportData) -> dict:
             "zeta_doubled_amplitude_mm": num(br.zeta_doubled_amplitude),
             "zeta_doubled_modal_amplitude": num(br.zeta_doubled_modal),
             "snms_vs_forced": snms_rows(data, key, br),
-            "points": int(br.omega.size), "seconds": br.seconds}
+            "points": int(br.omega.size), "seconds": br.seconds, "complete": bool(br.complete)}
     return out
 
 

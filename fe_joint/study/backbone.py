@@ -67,6 +67,8 @@ class BackboneResult:
         zeta_doubled_amplitude: response amplitude where ζ first reaches twice its stuck value,
             mm (NaN if it never does); zeta_doubled_modal: the same as a modal amplitude.
         seconds: wall time of the continuation (and synthesis), s; newton_iterations: total.
+        complete: False when the continuation stopped before the top amplitude (a step that
+            Newton could not complete even after halvings); stop_reason says where.
     """
     config: str
     rq_um: float
@@ -102,6 +104,8 @@ class BackboneResult:
     zeta_doubled_modal: float
     seconds: float
     newton_iterations: int
+    complete: bool = True
+    stop_reason: str = ""
 
     @property
     def key(self) -> BackboneKey:
@@ -147,6 +151,8 @@ class BackboneResult:
                 kw[k] = float(kw[k])
             elif t == "int":
                 kw[k] = int(kw[k])
+            elif t == "bool":
+                kw[k] = bool(kw[k])
         return cls(**kw)
 
     def write_csv(self, path: Path) -> None:
@@ -206,7 +212,9 @@ def compute_backbone(key: BackboneKey, rm, joint, f_lin: float, peak_amplitude_t
     phi_r = abs(G.Phi[rm.response_dof, elastic[mode]])
     a1 = END_OF_TOP_PEAK * peak_amplitude_top / phi_r
     a0 = START_OF_ONSET * onset if np.isfinite(onset) and onset < a1 else 1e-3 * a1
-    bb = hb.nonlinear_mode(mode, (a0, a1), dof=rm.response_dof, n_points=n_points)
+    # a continuation that cannot go on keeps the points it reached (warned about by the stage):
+    # one joint's backbone must not stop the study
+    bb = hb.nonlinear_mode(mode, (a0, a1), dof=rm.response_dof, n_points=n_points, partial=True)
     exc, resp = rm.excitation_dof, rm.response_dof
     snms_hz, snms_amp = [], []
     for lv in levels:
@@ -232,4 +240,5 @@ def compute_backbone(key: BackboneKey, rm, joint, f_lin: float, peak_amplitude_t
         bg_lam=bg.lam, bg_c=bg.c, bg_row=bg.row, bg_phi=bg.Phi, bg_static=bg.static,
         levels=np.asarray(levels, float), snms_hz=np.asarray(snms_hz),
         snms_amplitude=np.asarray(snms_amp), zeta_doubled_amplitude=dz, zeta_doubled_modal=dm,
-        seconds=time.perf_counter() - t0, newton_iterations=int(bb.iterations.sum()))
+        seconds=time.perf_counter() - t0, newton_iterations=int(bb.iterations.sum()),
+        complete=bb.complete, stop_reason=bb.stop_reason)
