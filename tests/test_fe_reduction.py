@@ -126,3 +126,43 @@ def test_constraint_mode_identity_against_superlu():
 def test_damping_ratio_out_of_range(zeta):
     with pytest.raises(ValueError, match="damping_ratio"):
         modal_damping_matrix(np.eye(2), np.eye(2), zeta)
+
+
+def test_canonical_mode_signs():
+    """Each mode's largest coupling entry comes out positive whatever sign the solver gave it;
+    among entries tied to 1e-6 the first in boundary order decides (mirror-symmetric DOFs)."""
+    from fe_joint.fe.reduction import canonical_mode_signs
+    rng = np.random.default_rng(3)
+    m = rng.standard_normal((7, 40))
+    m[5, [3, 17]] = 10.0, -10.0 * (1 + 1e-9)        # a round-off tie: entry 3 decides
+    m[6, [2, 30]] = -10.0, 10.0                      # an exact tie: entry 2 decides
+    flips = np.array([1, -1, -1, 1, -1, 1, -1], float)[:, None]
+    a = m * canonical_mode_signs(m)[:, None]
+    b = (m * flips) * canonical_mode_signs(m * flips)[:, None]
+    assert np.array_equal(a, b)
+    assert a[5, 3] > 0 and a[6, 2] > 0
+    big = np.argmax(np.abs(a[:5]), axis=1)
+    assert (a[np.arange(5), big] > 0).all()
+
+
+def test_reduced_model_independent_of_eigenvector_signs():
+    """Craig–Bampton from the same fixed-interface modes with some of them negated (what another
+    run or rank count may return) gives the same reduced M and C to the bit; two builds of the
+    same model in one process are bit-identical."""
+    from fe_joint.fe.reduction import craig_bampton, fixed_interface_modes
+    data = build_box_joint(half=6.0, thickness=4.0, cell=2.0, shank_half=2.0, hole_half=4.0)
+    prob = assemble_joint(mesh_from_data(data, MPI.COMM_SELF), Material())
+    out = []
+    for flip in (False, True, False):
+        cond = BoundaryCondensation(prob.K, prob.M, prob.layout.dofs)
+        fm, modes = fixed_interface_modes(cond, 150000.0)
+        if flip:
+            for v in modes[::2]:
+                v.scale(-1.0)
+        out.append(craig_bampton(prob, 150000.0, 1e-3, condensation=cond,
+                                 interface_modes=(fm, modes)))
+        cond.destroy()
+    assert out[0].metadata["n_modes"] >= 4
+    for rm in out[1:]:
+        for k in ("K", "M", "C", "reduced_frequencies"):
+            assert np.array_equal(getattr(rm, k), getattr(out[0], k)), k
