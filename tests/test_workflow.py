@@ -22,7 +22,7 @@ name = "e2e"
 rq_um = [1.0, 15.0]
 v_rq_um = 15.0
 [dynamics]
-configurations = ["baseline", "v1", "v3"]
+configurations = ["baseline", "v3"]
 levels = [2.0, 15.0, 40.0]
 """
 
@@ -56,6 +56,9 @@ REF_RTOL = 1e-6
 REF_TOLERANCES = (  # backbones: checked by their own tests below (SNMS vs forced, energy balance,
                   # linear limit); where a stalled continuation stops is a knife edge
                   ("/backbones/", None),
+                  # a spread over seeds is a difference of nearly equal frequencies: the FE
+                  # round-off (1e-8) reaches it at 1e-5
+                  ("stuck_hz/std", 1e-3),
                   ("check-linear@tiny/zeta_fric", None), ("zeta_from_amplitude", 1e-4), ("zeta_", 1e-2),
                   ("loss_factor", 1e-2), ("modal_amplitude", 1e-4), ("slip_onset", 1e-4),
                   ("n_points", None), ("n_nonlinear", None), ("coupling_rel_error", None),
@@ -208,7 +211,7 @@ def test_damaged_curve_and_new_level_rerun_only_their_jobs(run: Path, tmp_path: 
     computed = {k.name for k, cr in new.items()
                 if (k.config, k.rq_um, cr.level) not in old
                 or old[(k.config, k.rq_um, cr.level)].seconds != cr.seconds}
-    assert computed == {"baseline@L0", "v1@L0", "v3-rq15@L0", "baseline@L1"}
+    assert computed == {"baseline@L0", "v3-rq15@L0", "baseline@L1"}
     a, b = _summary(run), _summary(out)
     for name, p in a["peaks"].items():
         if "@L" in name and name != "baseline@L0":
@@ -301,11 +304,11 @@ def test_report_written(run: Path) -> None:
 def test_backbones_predict_the_forced_peaks(run: Path) -> None:
     """Issue 15: the peak synthesized from each joint's backbone (SNMS + off-resonant background)
     against the forced FRF's polished peak at every level the study swept: frequency within
-    0.2 %, amplitude within 5 %, for baseline, v1 and v3 on every surface (measured on the quick
+    0.2 %, amplitude within 5 %, for baseline and v3 on every surface (measured on the quick
     preset: <= 1.8e-4 and <= 6.1e-3)."""
     s = _summary(run)
     bbs = s["backbones"]
-    assert sorted(bbs) == ["baseline", "v1", "v3-rq1", "v3-rq15"]
+    assert sorted(bbs) == ["baseline", "v3-rq1", "v3-rq15"]
     compared, beyond = 0, 0
     for name, v in bbs.items():
         for lvl, r in v["snms_vs_forced"].items():
@@ -322,9 +325,9 @@ def test_backbones_predict_the_forced_peaks(run: Path) -> None:
             # the table's forced peak is the study's curve
             assert r["forced_hz"] == s["peaks"][f"{name}@{lvl}"]["peak_hz"]
             compared += 1
-    # baseline, v1, v3 Rq 15 at 3 levels, v3 Rq 1 at L1; with the 4th-order march v1's
-    # continuation stops before its top-level peak (issue 15: a step Newton could not complete)
-    assert compared + beyond == 3 + 3 + 3 + 1 and beyond <= 2
+    # baseline and v3 Rq 15 at 3 levels, v3 Rq 1 at L1 (a backbone that stops early, as v1's did
+    # when this case had v1, may miss a peak beyond its end: checked above)
+    assert compared + beyond == 3 + 3 + 1 and compared >= 6
 
 
 def test_backbone_files_energy_balance_and_linear_limit(run: Path) -> None:
@@ -339,7 +342,7 @@ def test_backbone_files_energy_balance_and_linear_limit(run: Path) -> None:
     s = _summary(run)
     dyn = json.loads((run / "stages" / "dynamics.json").read_text())["summary"]
     bbs = load_backbones(run / "dynamics")
-    assert len(bbs) == 4
+    assert len(bbs) == 3
     for key, br in bbs.items():
         work = br.xi * 2 * np.pi / br.omega * br.kinetic
         diss = br.friction_energy + br.viscous_energy
@@ -370,14 +373,18 @@ def test_backbone_files_energy_balance_and_linear_limit(run: Path) -> None:
                 assert sr.peak_amplitude == pytest.approx(br.snms_amplitude[i], rel=1e-9)
 
 
+# one level where the joint slips, one seed, no hardness variant: the pipeline twice (1 and 2
+# ranks) inside the MPI phase's time
 MPI_CASE = """
 name = "e2e-mpi"
 [roughness]
 rq_um = [15.0]
 v_rq_um = 15.0
+seeds = 1
+material_hardness = 0.0
 [dynamics]
 configurations = ["baseline", "v3"]
-levels = [2.0, 15.0]
+levels = [15.0]
 [contact]
 kt_max_passes = 1
 """
