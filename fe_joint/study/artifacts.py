@@ -281,3 +281,11 @@ def load_backbones(folder: Path) -> dict:
         br = BackboneResult.load(f)
         out[br.key] = br
     return out
+
+
+def save_dataclass_npz(obj, path: Path) -> None:
+    """Write a dataclass of arrays and numbers as one ``.npz`` (field name → array), atomically:
+    a killed run leaves the old file or none, never half of one."""
+    tmp = Path(str(path) + ".tmp.npz")
+    np.savez(tmp, **{k: np.asarray(v) for k, v in dataclasses.asdict(obj).items()})
+    tmp.replace(path)

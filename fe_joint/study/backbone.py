@@ -16,7 +16,7 @@ kept) and exported as ``<name>.csv`` in the fields tmdsimpy publishes its backbo
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +24,7 @@ import numpy as np
 from hbm import synthesize
 from hbm.nonlinear_mode import Backbone, LinearBackground, NonlinearModeProblem
 
-from .artifacts import BackboneKey
+from .artifacts import BackboneKey, save_dataclass_npz
 from .frf import OPEN, SWEEP_TOLERANCES, SweepSettings, _setup
 
 #: backbone points (log-spaced modal amplitudes; the slip onset is added as one more)
@@ -135,15 +135,14 @@ class BackboneResult:
             displacement=self.displacement, background=bg)
 
     def save(self, path: Path) -> None:
-        tmp = Path(str(path) + ".tmp.npz")
-        np.savez(tmp, **{k: np.asarray(v) for k, v in asdict(self).items()})
-        tmp.replace(path)
+        save_dataclass_npz(self, path)
 
     @classmethod
     def load(cls, path: Path) -> "BackboneResult":
         with np.load(path, allow_pickle=False) as d:
             kw = {k: d[k] for k in d.files}
-        kinds = {f.name: f.type for f in fields(cls)}
+        # (a field with a default may be missing from an older file: it keeps its default)
+        kinds = {f.name: f.type for f in fields(cls) if f.name in kw}
         for k, t in kinds.items():
             if t == "str":
                 kw[k] = str(kw[k])

@@ -9,7 +9,7 @@ tangential force amplitude and loops — as plain arrays (:class:`CurveResult`, 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from types import SimpleNamespace
 from pathlib import Path
 
@@ -19,7 +19,7 @@ from hbm import (ContinuationSettings, ConvergenceError, FrictionContacts, Harmo
                  LinearStructure)
 
 from ..model.joint import JointModel
-from .artifacts import CurveKey
+from .artifacts import CurveKey, save_dataclass_npz
 
 OPEN = 4   # status code of elements left out of the dynamics (hbm's OPEN)
 
@@ -119,9 +119,7 @@ class CurveResult:
         return replace(self, **key.to_fields())
 
     def save(self, path: Path) -> None:
-        tmp = Path(str(path) + ".tmp.npz")
-        np.savez(tmp, **{k: np.asarray(v) for k, v in asdict(self).items()})
-        tmp.replace(path)
+        save_dataclass_npz(self, path)
 
     @classmethod
     def load(cls, path: Path) -> "CurveResult":
