@@ -16,7 +16,7 @@ Public API (docs/design.md, "Public API")::
     sr = synthesize(bb, force); sr.peak_omega, sr.peak_amplitude, sr.omega_low, sr.omega_high
                                                  # mode + off-resonant background (bb.background)
 """
-from .errors import ConvergenceError
+from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 from .friction import FrictionContacts, STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OPEN, OPEN
 from .structure import LinearStructure
@@ -25,7 +25,7 @@ from .continuation import ContinuationSettings, FRFResult
 from .nonlinear_mode import Backbone, LinearBackground
 from .synthesis import SynthesizedResponse, synthesize
 
-__all__ = ["ConvergenceError", "Fourier", "FrictionContacts", "LinearStructure", "HarmonicBalance",
+__all__ = ["ConvergenceError", "CycleNotClosed", "Fourier", "FrictionContacts", "LinearStructure", "HarmonicBalance",
            "Solution", "ElementResults", "FRFResult", "ContinuationSettings", "STUCK", "STICK_SLIP",
            "GROSS_SLIP", "PARTLY_OPEN", "OPEN", "Backbone", "LinearBackground", "SynthesizedResponse",
            "synthesize"]

@@ -40,7 +40,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from .errors import ConvergenceError
+from .errors import ConvergenceError, CycleNotClosed
 from . import stability as stab
 
 #: accepted values of ``ContinuationSettings.stability``
@@ -166,12 +166,12 @@ class _Eval(NamedTuple):
 
 
 class _Correction(NamedTuple):
-    """Corrector outcome: converged?, last iterate (U (n_H, n_c) mm, w rad/s), its evaluation,
-    iterations used."""
+    """Corrector outcome: converged?, last iterate (U (n_H, n_c) mm, w rad/s), its evaluation
+    (None when the march did not close at the predictor itself), iterations used."""
     ok: bool
     U: np.ndarray
     w: float
-    ev: _Eval
+    ev: _Eval | None
     it: int
 
 
@@ -259,9 +259,15 @@ def _line_search(hb, force: np.ndarray, U: np.ndarray, w: float, dU: np.ndarray,
     for _ in range(6):
         Ut, wt = U + alpha * dU, w + alpha * dw
         if wt > 0:
-            evt = _evaluate(hb, force, Ut, wt)
-            if np.linalg.norm(evt.R) <= (1 - 1e-4 * alpha) * r:
-                break
+            try:
+                evt = _evaluate(hb, force, Ut, wt)
+            except CycleNotClosed:
+                # a trial far from the branch can drive an element's march into a state that
+                # does not close: a shorter step, like a larger residual
+                evt = None
+            else:
+                if np.linalg.norm(evt.R) <= (1 - 1e-4 * alpha) * r:
+                    break
         alpha *= 0.5
     return alpha, Ut, wt, evt
 
@@ -278,7 +284,10 @@ def _correct(hb, force: np.ndarray, sc: _Scaling, Yp: np.ndarray, t: np.ndarray,
         _Correction; ``ok`` False if the limit is reached or a step would make w <= 0.
     """
     U, w = sc.unscale(Yp)
-    ev = _evaluate(hb, force, U, w)
+    try:
+        ev = _evaluate(hb, force, U, w)
+    except CycleNotClosed:
+        return _Correction(False, U, w, None, 0)      # the predictor is too far: shorter step
     step = np.inf
     for it in range(1, max_corrector + 1):
         r = np.linalg.norm(ev.R)
@@ -289,7 +298,7 @@ def _correct(hb, force: np.ndarray, sc: _Scaling, Yp: np.ndarray, t: np.ndarray,
         tU, tw = sc.border(t)
         [(dU, dw)], _ = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(ev.R, cval)])
         alpha, Ut, wt, evt = _line_search(hb, force, U, w, dU, dw, r)
-        if wt <= 0:
+        if wt <= 0 or evt is None:
             return _Correction(False, U, w, ev, it)
         step = max(np.linalg.norm(alpha * dU), abs(alpha * dw) / sc.ws * ev.scale)
         U, w, ev = Ut, wt, evt
@@ -406,13 +415,16 @@ class _Branch:
                     return corr, False
                 self.ds *= 0.5
                 continue
-            corr, ok = self._corner_restart(Y, Yp, corr)
-            if ok:
-                return corr, True
+            if corr.ev is not None:       # None: the predictor's march did not close
+                corr, ok = self._corner_restart(Y, Yp, corr)
+                if ok:
+                    return corr, True
             self.ds *= 0.5
             if self.ds < s.ds_min:
+                res = (float(np.linalg.norm(corr.ev.R) / corr.ev.scale) if corr.ev is not None
+                       else float("nan"))
                 raise ConvergenceError(f"continuation step fell below ds_min near omega = {self.w:.6g} rad/s",
-                                       float(np.linalg.norm(corr.ev.R) / corr.ev.scale))
+                                       res)
 
     def _amplitude_step_ok(self, corr: _Correction) -> bool:
         """The arc length lives on the contact unknowns; the response DOF may resonate in a mode

@@ -12,3 +12,11 @@ class ConvergenceError(RuntimeError):
     def __init__(self, message: str, residual: float = float("nan")) -> None:
         super().__init__(f"{message} (residual reached: {residual:.3e})")
         self.residual = float(residual)
+
+
+class CycleNotClosed(ConvergenceError):
+    """The AFT time march of a friction element did not reach a periodic state.
+
+    Raised by the residual evaluation itself (not by a Newton iteration), so a continuation
+    treats it as a failed trial point and shortens its step instead of ending the branch.
+    """

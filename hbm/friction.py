@@ -51,7 +51,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import ConvergenceError
+from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 
 STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OPEN, OPEN = 0, 1, 2, 3, 4
@@ -1353,7 +1353,7 @@ class FrictionContacts:
         n_cycles = self.max_cycles if max_cycles is None else int(max_cycles)
         final, hist, cyc, err, jumped = self._forward(tab, newton, n_cycles, jacobian)
         if err > self.close_tol:
-            raise ConvergenceError(f"friction cycle did not close in {n_cycles} periods", err)
+            raise CycleNotClosed(f"friction cycle did not close in {n_cycles} periods", err)
         # Elements that stick through the whole closing cycle have a neutral, history-dependent
         # slider; if a Newton restart touched their history, redo them by plain repetition from
         # rest so that state and Jacobian are those of the march from rest.

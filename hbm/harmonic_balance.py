@@ -43,7 +43,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .continuation import ContinuationSettings, FRFResult, continue_frf
-from .errors import ConvergenceError
+from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 from .friction import FrictionContacts
 from .structure import LinearStructure, Receptance
@@ -488,6 +488,28 @@ class HarmonicBalance:
         where Newton can stagnate) ||R|| <= 10 tol * scale with a last step below 10 tol * scale."""
         return r <= self.tol * scale or (r <= 10 * self.tol * scale and step <= 10 * self.tol * scale)
 
+    def _line_search(self, omega: float, Ul: np.ndarray, U: np.ndarray, dU: np.ndarray, r: float):
+        """Halve alpha (at most 10 times) while ||R(U + alpha dU)|| does not decrease enough.
+
+        A trial whose friction march does not close (CycleNotClosed) counts as a rejected one.
+
+        Returns:
+            (alpha, residual() at U + alpha dU) of the accepted trial, or of the last one that
+            could be evaluated when none decreased ||R||; (alpha, None) when none could be.
+        """
+        alpha, last = 1.0, (1.0, None)
+        for _ in range(10):
+            try:
+                trial = self.residual(U + alpha * dU, omega, Ul)
+            except CycleNotClosed:
+                alpha *= 0.5
+                continue
+            last = (alpha, trial)
+            if np.linalg.norm(trial[0]) <= (1 - 1e-4 * alpha) * r:
+                break
+            alpha *= 0.5
+        return last
+
     def newton(self, omega: float, force: np.ndarray, U0: np.ndarray):
         """Damped Newton at fixed omega from U0; returns (U, residual, iterations)."""
         Ul = self.ulin(omega, force)
@@ -500,16 +522,12 @@ class HarmonicBalance:
                 self._last = (g, (nl, Dg))
                 return U, r / self._scale(U, Ul), it - 1, nl.size
             (dU,) = self.linsolve(omega, nl, Dg, [-R])
-            alpha = 1.0
-            for _ in range(10):
-                Ut = U + alpha * dU
-                Rt, gt, nlt, Dgt = self.residual(Ut, omega, Ul)
-                rt = np.linalg.norm(Rt)
-                if rt <= (1 - 1e-4 * alpha) * r:
-                    break
-                alpha *= 0.5
+            alpha, trial = self._line_search(omega, Ul, U, dU, r)
+            if trial is None:
+                raise ConvergenceError(f"Newton at omega = {omega:.6g} rad/s: the friction march "
+                                       "did not close at any line-search trial", r / self._scale(U, Ul))
             step = alpha * np.linalg.norm(dU)
-            U, R, g, nl, Dg, r = Ut, Rt, gt, nlt, Dgt, rt
+            U, (R, g, nl, Dg), r = U + alpha * dU, trial, np.linalg.norm(trial[0])
         if self.converged(r, self._scale(U, Ul), step):
             self._last = (g, (nl, Dg))
             return U, r / self._scale(U, Ul), self.max_iter, nl.size

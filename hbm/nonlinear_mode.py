@@ -56,7 +56,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .errors import ConvergenceError
+from .errors import ConvergenceError, CycleNotClosed
 from .harmonic_balance import Solution
 from .structure import Receptance
 
@@ -361,6 +361,16 @@ class NonlinearModeProblem:
         sU = max(np.linalg.norm(U), np.linalg.norm(self.psi_j) * a, 1e-300)
         return np.hypot(np.linalg.norm(R) / sU, abs(r)), sU
 
+    def _trial(self, U, w, xi, a, phi: float, alpha: float) -> bool:
+        """Line-search trial: True if the merit falls enough (evaluation kept in _last_trial).
+        A trial whose friction march does not close counts as a rejected one (shorter step)."""
+        try:
+            ev = self._eval(U, w, xi, a)
+        except CycleNotClosed:
+            return False
+        self._last_trial = (ev, self._merit(ev[0], ev[1], U, a))
+        return self._last_trial[1][0] <= (1 - 1e-4 * alpha) * phi
+
     def solve(self, a: float, U: np.ndarray, w: float, xi: float):
         """Damped Newton at amplitude a from (U, w, xi).
 
@@ -389,11 +399,9 @@ class NonlinearModeProblem:
             alpha = 1.0
             for _ in range(12):
                 Ut, wt, xt = U + alpha * dU, w + alpha * dw, xi + alpha * dxi
-                if wt > 0:
-                    ev = self._eval(Ut, wt, xt, a)
-                    phit, sUt = self._merit(ev[0], ev[1], Ut, a)
-                    if phit <= (1 - 1e-4 * alpha) * phi:
-                        break
+                if wt > 0 and self._trial(Ut, wt, xt, a, phi, alpha):
+                    ev, (phit, sUt) = self._last_trial
+                    break
                 alpha *= 0.5
             else:
                 break

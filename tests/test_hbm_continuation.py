@@ -6,7 +6,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hbm import ContinuationSettings, FrictionContacts, HarmonicBalance, LinearStructure
+from hbm import (ContinuationSettings, CycleNotClosed, FrictionContacts, HarmonicBalance,
+                 LinearStructure)
 from hbm.reference import jenkins_frf_h1
 
 
@@ -235,3 +236,56 @@ def test_gmres_path_passes_corner_folds_like_the_dense_path():
     # same points; at the corners near the peak the amplitude is sensitive (1e-6 apart there)
     assert len(a.omega) == len(b.omega) and np.max(np.abs(a.omega - b.omega)) <= 1e-6
     assert np.max(np.abs(a.amplitude - b.amplitude) / a.amplitude) <= 1e-5
+
+
+class FlakyContacts(FrictionContacts):
+    """Contacts whose march 'does not close' at every ``every``-th new point (as an element far
+    from the branch can on a continuation's trial point): CycleNotClosed is raised instead. As
+    the real march, it is deterministic: a point once evaluated (or refused) is again."""
+
+    every = 20
+
+    def evaluate(self, u, *args, **kwargs):
+        seen = self.__dict__.setdefault("seen", {})
+        key = np.asarray(u).tobytes()
+        if key not in seen:
+            self.calls = getattr(self, "calls", 0) + 1
+            seen[key] = self.calls % self.every == 0 and self.calls > 1
+            self.raised = getattr(self, "raised", 0) + seen[key]
+        if seen[key]:
+            raise CycleNotClosed("friction cycle did not close in 200 periods", 3.9e-3)
+        return super().evaluate(u, *args, **kwargs)
+
+
+def test_a_march_that_does_not_close_shortens_the_step_not_the_curve():
+    """A trial point whose friction march does not close (CycleNotClosed, raised by the residual
+    evaluation) is a rejected trial: the continuation halves its step and carries on. The curve
+    still ends at the band's end on the closed form. (On the resonator's quick preset one such
+    trial at the top level stopped the whole run with exit 3.)"""
+    m, k, cc, kt, fs, F = 1.0, 1.0, 0.02, 1.0, 0.1, 0.3
+    s = LinearStructure([[m]], [[k]], [[cc]])
+    c = FlakyContacts(np.array([[[0, -1, -1], [-1, -1, -1]]]), kt=kt, kn=1.0, mu=fs, n0=1.0)
+    hb = HarmonicBalance(s, c, harmonics=1, samples=1024)
+    frf = hb.frf(0.7, 1.8, np.array([F]), dof=0, ds_max=0.3, max_domega=1.1 / 40)
+    assert c.raised >= 5
+    assert frf.omega[-1] == 1.8 and np.all(np.diff(frf.omega) > 0)
+    pts = np.union1d(np.arange(0, frf.omega.size, 7), [np.argmax(frf.amplitude)])
+    ref = np.array([jenkins_frf_h1(w, m, k, cc, kt, fs, F)[0] for w in frf.omega[pts]])
+    assert np.max(np.abs(frf.amplitude[pts] - ref) / ref) <= 6e-5
+
+
+def test_a_march_that_does_not_close_is_a_rejected_trial_of_the_backbone():
+    """The same for the nonlinear mode (EPMC): with every 20th new point refused, the backbone
+    is the one computed without failures (ω to 1e-8, ζ to 1e-6), not a stalled one."""
+    s = LinearStructure([[1.0]], [[1.0]], damping_ratio=0.01)
+    dofs = np.array([[[0, -1, -1], [-1, -1, -1]]])
+    ref = HarmonicBalance(s, FrictionContacts(dofs, kt=1.0, kn=1.0, mu=0.1, n0=1.0), harmonics=1,
+                          samples=256).nonlinear_mode(0, (0.05, 5.0), dof=0, n_points=12)
+    c = FlakyContacts(dofs, kt=1.0, kn=1.0, mu=0.1, n0=1.0)
+    c.every = 4
+    bb = HarmonicBalance(s, c, harmonics=1, samples=256).nonlinear_mode(0, (0.05, 5.0), dof=0,
+                                                                        n_points=12)
+    assert c.raised >= 3 and bb.complete
+    # the same points to the Newton tolerance (different iterates reach them)
+    assert np.allclose(bb.omega, ref.omega, rtol=1e-8, atol=0)
+    assert np.allclose(bb.zeta, ref.zeta, rtol=1e-6, atol=0)
