@@ -301,3 +301,33 @@ def test_partial_backbone_keeps_the_points_reached(monkeypatch):
     w = backbone_guard("v1", part.complete, float(part.displacement_amplitude[-1]), part.stop_reason)
     assert len(w) == 1 and w[0].kind == "backbone-incomplete" and w[0].value <= a_max * 1.01
     assert backbone_guard("v1", True, 1.0, "") == []
+
+
+def test_snms_peak_is_the_resonance_not_the_rigid_body_background():
+    """A free-free 2-DOF (masses 1, spring 1 and a Jenkins element between them, ζ = 1 %):
+    the synthesized low branch of a large force at the backbone's small amplitudes runs down to
+    W -> 0, where the rigid-body background (F/(2W²) at the DOF) exceeds the resonance. The
+    synthesized peak must still be the resonance's: the forced HBM peak, to 1e-3 in frequency
+    and 2e-2 in amplitude. (Before, the search took W = 0.09 rad/s, amplitude 10.3, for a mode
+    near 1.5 rad/s; the resonator's v3 backbone gave 17.4 Hz at its top level.)"""
+    M, K = np.eye(2), np.array([[1.0, -1.0], [-1.0, 1.0]])
+    s = LinearStructure(M, K, damping_ratio=0.01)
+    c = FrictionContacts(np.array([[[0, -1, -1], [1, -1, -1]]]), kt=1.0, kn=1.0, mu=0.1, n0=1.0)
+    hb = HarmonicBalance(s, c, harmonics=1, samples=256)
+    on = NonlinearModeProblem(hb, 0).onset_amplitude()
+    bb = hb.nonlinear_mode(0, (0.3 * on, 10 * on), dof=0, n_points=30)
+    F = np.array([0.172, 0.0])
+    sr = synthesize(bb, F)
+    assert sr.in_range and np.nanmin(sr.omega_low) < 0.25 * bb.omega.min()   # the far branch
+    fr = hb.frf(0.9 * sr.peak_omega, 1.1 * sr.peak_omega, F, dof=0, stability="none")
+    k = int(np.argmax(fr.amplitude))
+    assert 0 < k < len(fr.omega) - 1
+    last = [fr.solutions[k]]
+
+    def neg(om):
+        last[0] = hb.solve(om, F, guess=last[0])
+        return -last[0].amplitude(0)
+    r = minimize_scalar(neg, bounds=(fr.omega[k - 1], fr.omega[k + 1]), method="bounded",
+                        options={"xatol": 1e-10})
+    assert abs(sr.peak_omega / r.x - 1) <= 1e-3
+    assert abs(sr.peak_amplitude / -r.fun - 1) <= 2e-2
