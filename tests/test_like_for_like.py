@@ -109,3 +109,41 @@ def test_like_for_like_joints() -> None:
     keep = joint_v2_keep(v2, 0.8, 2e3)
     assert keep.kn.tolist() == [2e3, 2e3, 5e3] and keep.kt[1] == pytest.approx(1.6e3)
     assert keep.n0[1] == 0 and keep.gap[1] == 1e-3
+
+
+def test_like_for_like_jobs_leave_the_curve_keys_alone() -> None:
+    """Adding the like-for-like joints to the study adds two backbone jobs and changes no FRF
+    job's cache key (a rerun of a finished run computes only the new backbones)."""
+    import dataclasses
+    from fe_joint.study import jobs as study
+    from fe_joint.study.configurations import LIKE_FOR_LIKE, like_for_like_joints
+    from test_artifacts import _inputs, _keyed
+    inp = _inputs([1.0, 2.0, 4.0])
+    for j in inp.joints.values():
+        j.n0[:2] = 0.0                     # two elements open at rest (v2 removes them)
+    inp.joints["v2"].kn[:2] = 0.0
+    before = {j.name: j.key for j in _keyed(inp)}
+    joints = {**inp.joints, **like_for_like_joints(inp.joints, 0.3)}
+    after = {j.name: j.key for j in _keyed(dataclasses.replace(inp, joints=joints))}
+    assert after == before
+    names = [j.config for j in study.backbone_jobs(inp.case)]
+    assert [n for n in names if n in LIKE_FOR_LIKE] == list(LIKE_FOR_LIKE)
+    assert joints["v1-v2set"].kn[:2].tolist() == [0.0, 0.0]
+    assert joints["v2-keep"].kn[:2].min() > 0
+
+
+def test_off_backbone_peak_is_nan_and_element_set_warning() -> None:
+    from types import SimpleNamespace
+    from fe_joint.report.like_for_like import _checked, warnings
+    br = SimpleNamespace(displacement_amplitude=np.array([1e-3, 1.0]),
+                         frequency_hz=np.array([245.0, 240.0]), zeta=np.array([1e-3, 3e-3]))
+    assert np.isnan(_checked(br, 17.36, 0.5)["hz"])          # a spurious maximum far off the band
+    assert np.isnan(_checked(br, 242.0, 5.0)["amplitude"])   # beyond the backbone's end
+    ok = _checked(br, 242.0, 0.1)
+    assert ok["hz"] == 242.0 and 1e-3 < ok["zeta"] < 3e-3
+    lv = {"level": 1.0, "closing": 0, "max_mean_normal_N": 0.0, "energy_share": 0.0}
+    s = {"like_for_like": {"element_set": {"removed": 5, "levels": {"L0": lv}}, "split": {}}}
+    assert warnings(s) == []                                  # nothing closes: like for like
+    s["like_for_like"]["element_set"]["levels"]["L1"] = {**lv, "closing": 2}
+    w = warnings(s)
+    assert len(w) == 1 and w[0]["kind"] == "element-set" and w[0]["value"] == 2

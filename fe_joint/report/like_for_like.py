@@ -19,9 +19,9 @@ import numpy as np
 
 from hbm import synthesize
 
-from ..model.joint import closure_onset, stuck_modes
+from ..model.joint import JointModel, closure_onset, stuck_modes
 from ..study.artifacts import BackboneKey
-from ..study.configurations import (LIKE_FOR_LIKE, PAPER_LEVELS, damping_for_level,
+from ..study.configurations import (KEEP_KN_SHARE, PAPER_LEVELS, damping_for_level,
                                     like_for_like_joints, paper_ratio_levels)
 from ..study.frf import OPEN
 from .backbones import zeta_at
@@ -38,10 +38,19 @@ def _joints(data: ReportData) -> dict:
     sv, k_ref = data.surfaces[data.v_rq], data.case.contact.k_ref
     full = np.full(len(data.area), k_ref)
     # the report's v1 counts unloaded elements as 0 for k_eq; the dynamics keeps them at k_ref
-    v1 = type(j["v1"])("v1", n0=sv.n0, gap=sv.gap_el, kn=full, kt=full.copy(), area=data.area,
+    v1 = JointModel("v1", n0=sv.n0, gap=sv.gap_el, kn=full, kt=full.copy(), area=data.area,
                        rq_um=data.v_rq)
     base = {"v1": v1, "v2": j["v2"]}
     return {**base, **like_for_like_joints(base, data.case.material.poisson)}
+
+
+def _light_loads(v2: JointModel) -> dict:
+    """{min, max} N0 (N) of the loaded elements whose k_n v2-keep gives the open ones (the
+    lightest ``KEEP_KN_SHARE`` by pressure): to compare with the loads closing elements reach."""
+    c = v2.closed & (v2.kn > 0)
+    p = v2.n0[c] / v2.area[c]
+    n = v2.n0[c][p <= np.quantile(p, KEEP_KN_SHARE)]
+    return {"min": float(n.min()), "max": float(n.max())}
 
 
 def element_set(data: ReportData) -> dict:
@@ -70,7 +79,7 @@ def element_set(data: ReportData) -> dict:
            "gap_um": ({"min": float(g.min()), "median": float(np.median(g)), "max": float(g.max())}
                       if g.size else None),
            "kn_open": float(js["v2-keep"].kn[removed].max()) if removed.any() else None,
-           "levels": {}}
+           "light_n0_N": _light_loads(v2), "levels": {}}
     bolt = float(np.sum(v1.n0))
     for i in range(len(data.levels)):
         cr = data.curve("v1", i)
@@ -88,11 +97,22 @@ def element_set(data: ReportData) -> dict:
     return out
 
 
+def _checked(br, hz: float, x: float) -> dict:
+    """A synthesized peak (Hz, mm) and the backbone's ζ there; all NaN when the peak is not on
+    the backbone (amplitude outside its range or frequency outside its band ± 1 %: the synthesis
+    then returns a spurious maximum, e.g. 17 Hz where ζ(a) falls again at the backbone's end)."""
+    a, f = br.displacement_amplitude, br.frequency_hz
+    ok = (np.isfinite(hz) and np.isfinite(x) and a[0] <= x <= a[-1]
+          and 0.99 * f.min() <= hz <= 1.01 * f.max())
+    nan = float("nan")
+    return ({"hz": float(hz), "amplitude": float(x), "zeta": zeta_at(br, float(x))} if ok
+            else {"hz": nan, "amplitude": nan, "zeta": nan})
+
+
 def _peak(br, level: float) -> dict:
-    """The synthesized peak of a backbone at ``level`` (N): Hz, mm, ζ there (NaN beyond it)."""
+    """The synthesized peak of a backbone at ``level`` (N): Hz, mm, ζ there (NaN off it)."""
     sr = synthesize(br.backbone(), np.array([level, 0.0]))
-    x = float(sr.peak_amplitude)
-    return {"hz": float(sr.peak_omega / (2 * np.pi)), "amplitude": x, "zeta": zeta_at(br, x)}
+    return _checked(br, float(sr.peak_omega / (2 * np.pi)), float(sr.peak_amplitude))
 
 
 def split(data: ReportData) -> dict:
@@ -108,8 +128,7 @@ def split(data: ReportData) -> dict:
         for n in SPLIT:
             br = data.backbones.get(BackboneKey(n))
             if br is not None:
-                row[n] = {"hz": float(br.snms_hz[i]), "amplitude": float(br.snms_amplitude[i]),
-                          "zeta": zeta_at(br, float(br.snms_amplitude[i]))}
+                row[n] = _checked(br, float(br.snms_hz[i]), float(br.snms_amplitude[i]))
         levels[f"L{i}"] = {"level": float(lv), **row}
     return {"stuck_hz": stuck, "levels": levels}
 
@@ -122,15 +141,15 @@ def paper_levels(data: ReportData) -> dict:
         ours_over_macroslip, zeta_equivalent (per level: the ζ at which the paper's level i
         drives the resonator as our level i does), zeta_for_top (the ζ at which 2000 N sits at
         our top level's ratio, and then all three paper levels at the ratio levels'),
-        ratio_levels_N (1 : 2 : 4 anchored at our top level), peaks: {backbone: {"auto": [...],
+        ratio_levels_N (1 : 2 : 4 anchored at our top level), v_rq_um, peaks: {backbone: {"auto": [...],
         "ratios": [...]}} with {hz, amplitude mm, zeta} per level}.
     """
     z, ms, ours = data.rm.damping_ratio, data.macroslip, list(data.levels)
     ratio = paper_ratio_levels(ours[-1])
     peaks = {}
     for key, br in sorted(data.backbones.items(), key=lambda kv: kv[0].name):
-        auto = [{"hz": float(br.snms_hz[i]), "amplitude": float(br.snms_amplitude[i]),
-                 "zeta": zeta_at(br, float(br.snms_amplitude[i]))} for i in range(len(ours))]
+        auto = [_checked(br, float(br.snms_hz[i]), float(br.snms_amplitude[i]))
+                for i in range(len(ours))]
         peaks[key.name] = {"auto": auto, "ratios": [_peak(br, lv) for lv in ratio]}
     eq = ([damping_for_level(z, lv, p) for lv, p in zip(ours, PAPER_LEVELS)]
           if len(ours) == len(PAPER_LEVELS) else [])
@@ -138,7 +157,7 @@ def paper_levels(data: ReportData) -> dict:
             "paper_over_macroslip": [p / ms for p in PAPER_LEVELS], "ours_N": ours,
             "ours_over_macroslip": [lv / ms for lv in ours], "zeta_equivalent": eq,
             "zeta_for_top": damping_for_level(z, ours[-1], PAPER_LEVELS[-1]),
-            "ratio_levels_N": ratio, "peaks": peaks}
+            "ratio_levels_N": ratio, "v_rq_um": data.v_rq, "peaks": peaks}
 
 
 def section(data: ReportData) -> dict:
@@ -148,20 +167,29 @@ def section(data: ReportData) -> dict:
 
 
 def warnings(s: dict) -> list[dict]:
-    """The element-set check: a warning (``RunWarning`` fields) when an element v2 removes closes
-    in v1 at some level and no like-for-like backbone (v2-keep) quantifies what that changes."""
-    es = (s.get("like_for_like") or {}).get("element_set") or {}
-    have = "v2-keep" in ((s.get("like_for_like") or {}).get("split", {}).get("levels", {})
-                         .get("L0", {}))
-    out = []
-    for lvl, v in es.get("levels", {}).items():
-        if v["closing"] > 0 and not have:
-            out.append({"kind": "element-set", "subject": f"v1@{lvl}", "value": v["closing"],
-                        "limit": 0, "message": (
-                            f"{v['closing']} of the {es['removed']} elements v2/v3 leave out close "
-                            f"in v1 at {lvl} (cycle-mean N {v['mean_normal_N']:.3g} N): v1 → v2 is "
-                            "not like for like and no v2-keep backbone quantifies it")})
-    return out
+    """The element-set check: one warning (``RunWarning`` fields) when elements v2/v3 leave out
+    close during the cycle in v1 at some level (v1 → v2 then changes which elements exist, not
+    only their stiffness), with what keeping them changes (v2-keep against v2) where known."""
+    lf = s.get("like_for_like") or {}
+    es = lf.get("element_set") or {}
+    closing = {k: v for k, v in es.get("levels", {}).items() if v["closing"] > 0}
+    if not closing:
+        return []
+    top = list(closing)[-1]
+    row = (lf.get("split") or {}).get("levels", {}).get(top, {})
+    a, b = row.get("v2"), row.get("v2-keep")
+    effect = ("no v2-keep backbone quantifies what that changes" if not (a and b) else
+              f"keeping them (v2-keep) moves v2's {top} peak by {100 * (b['hz'] / a['hz'] - 1):+.2f} % "
+              f"in f, {100 * (b['amplitude'] / a['amplitude'] - 1):+.1f} % in amplitude and "
+              f"{100 * (b['zeta'] / a['zeta'] - 1):+.1f} % in ζ")
+    counts = ", ".join(f"{v['closing']} at {k}" for k, v in closing.items())
+    return [{"kind": "element-set", "subject": "v1 → v2", "value": closing[top]["closing"],
+             "limit": 0, "message": (
+                 f"Of the {es['removed']} elements v2/v3 leave out (no contact in their rough BEM "
+                 f"cell), {counts} close during the cycle in v1 (cycle-mean N up to "
+                 f"{closing[top]['max_mean_normal_N']:.3g} N, {100 * closing[top]['energy_share']:.1f} % "
+                 f"of v1's friction energy at {top}): v1 → v2 is not like for like; {effect} "
+                 "(report: \"Like for like\")")}]
 
 
 def _f(x, f: str = "{:.4g}") -> str:
@@ -193,16 +221,18 @@ def _element_set_md(es: dict, sp: dict) -> list[str]:
     L += ["", "Split of v1 → v2 into the element set and the stiffness: v1' = v1 on v2's element set "
           "(v1's loads, gaps and k_ref without the removed elements), v2-keep = v2 with the removed "
           f"elements kept open at rest as in v1, at the k_n of a lightly loaded contact of this surface "
-          f"(the area-weighted mean k_n of the lightest-loaded 10 % of v2's elements: "
-          f"{_f(es['kn_open'], '{:.3g}')} N/mm³; Mindlin k_t). The stuck modes model only the loaded "
+          f"(the area-weighted mean k_n of the lightest-loaded {100 * KEEP_KN_SHARE:g} % of v2's elements, "
+          f"N0 {es['light_n0_N']['min']:.3g}–{es['light_n0_N']['max']:.3g} N, the range of the cycle-mean "
+          f"loads closing elements reach above: {_f(es['kn_open'], '{:.3g}')} N/mm³; Mindlin k_t). "
+          "The stuck modes model only the loaded "
           "elements, so v1 and v1' share theirs exactly: the element set acts only through elements "
           "that close during the cycle. Peaks synthesized from each joint's backbone (SNMS), ζ the "
-          "backbone's there:", "",
+          "backbone's there (– : the peak is not on the backbone):", "",
           "| level | " + " | ".join(f"{n}: f [Hz] / X [µm] / ζ" for n in SPLIT) + " |",
           "|---|" + "---|" * len(SPLIT),
           "| stuck | " + " | ".join(f"{st[n]:.3f} / – / –" for n in SPLIT) + " |"]
     for lvl, row in sp["levels"].items():
-        cells = [("–" if n not in row else f"{row[n]['hz']:.3f} / {_f(1e3 * row[n]['amplitude'])} / "
+        cells = [("–" if n not in row else f"{_f(row[n]['hz'], '{:.3f}')} / {_f(1e3 * row[n]['amplitude'])} / "
                   f"{_f(row[n]['zeta'], '{:.3e}')}") for n in SPLIT]
         L.append(f"| {lvl} ({row['level']:.3g} N) | " + " | ".join(cells) + " |")
     return L + [""]
@@ -222,11 +252,12 @@ def _levels_md(pl: dict) -> list[str]:
          + f"; its 2000 N sits at our top level's ratio at ζ = {100 * pl['zeta_for_top']:.3g} %, and at that "
          "damping its three levels are our top level × 1/4, 1/2, 1 (the paper's ratios): "
          + " / ".join(f"{x:.3g}" for x in pl["ratio_levels_N"])
-         + " N. Every backbone's peak at those levels (SNMS, no forced FRF) beside the auto-rule levels:", "",
+         + " N. Every backbone's peak at those levels (SNMS, no forced FRF) beside the auto-rule levels "
+         "(– : the synthesized peak is not on the backbone):", "",
          "| backbone | auto: f [Hz] / X [µm] / ζ per level | paper ratios 1:2:4: f [Hz] / X [µm] / ζ per level |",
          "|---|---|---|"]
     for name, v in pl["peaks"].items():
-        cell = [", ".join(f"{p['hz']:.2f} / {_f(1e3 * p['amplitude'])} / {_f(p['zeta'], '{:.2e}')}"
+        cell = [", ".join(f"{_f(p['hz'], '{:.2f}')} / {_f(1e3 * p['amplitude'])} / {_f(p['zeta'], '{:.2e}')}"
                           for p in v[k]) for k in ("auto", "ratios")]
         L.append(f"| {name} | {cell[0]} | {cell[1]} |")
     return L + [""] + _trends(pl) + [""]
@@ -240,7 +271,7 @@ def _trends(pl: dict) -> list[str]:
     for which, title in (("auto", "auto-rule levels"), ("ratios", "paper-ratio levels")):
         parts = []
         if "baseline" in pk and v3:
-            mid = [k for r, k in v3 if abs(r - 10) < 1e-9] or [v3[-1][1]]
+            mid = [k for r, k in v3 if r == pl["v_rq_um"]] or [v3[-1][1]]
             zb = [p["zeta"] for p in pk["baseline"][which]]
             zv = [p["zeta"] for p in pk[mid[0]][which]]
             parts.append(f"{mid[0]} vs baseline ζ: " + ", ".join(

@@ -374,8 +374,11 @@ def backbone_plan(inp: StudyInputs, folder: Path, job: Job):
               and (k.rq_um == job.rq_um if job.config == "v3" else True)]
     if not curves:
         raise ValueError(f"backbone of {job.name}: no forced curve of that joint in {folder}")
-    hi = max(cr.level for cr in curves)
-    return joint, f_lin, max(cr.peak_amplitude for cr in curves if cr.level == hi) * top / hi
+    amp = {}
+    for cr in curves:      # per joint, its curve at the highest level it was swept at
+        if cr.config not in amp or cr.level > amp[cr.config][0]:
+            amp[cr.config] = (cr.level, cr.peak_amplitude)
+    return joint, f_lin, max(a * top / lv for lv, a in amp.values())
 
 
 def run_backbone_job(inp: StudyInputs, folder: Path, job: Job) -> dict:
