@@ -336,7 +336,8 @@ def v3_surfaces(case) -> list[float]:
 
 
 def backbone_jobs(case) -> list[Job]:
-    """One backbone per fixed configuration and per v3 surface, v3 first (they need the v3 fixed
+    """One backbone per fixed configuration and per v3 surface, v3 first, and one per
+    like-for-like joint when v1 and v2 are compared (they need the v3 fixed
     points' converged stiffnesses, so they run after the FRF jobs: :func:`run_backbone_job`)."""
     out = [Job(kind="backbone", config="v3", level_index=None, rq_um=rq) for rq in v3_surfaces(case)]
     out += [Job(kind="backbone", config=c, level_index=None)
