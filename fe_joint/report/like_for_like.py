@@ -247,9 +247,10 @@ def _levels_md(pl: dict) -> list[str]:
          "levels\"). The paper's 500 / 1000 / 2000 N are "
          + " / ".join(f"{r:.3g}" for r in pl["paper_over_macroslip"])
          + " × that estimate (gross slip), ours " + " / ".join(f"{r:.3g}" for r in pl["ours_over_macroslip"])
-         + ". The paper's level i would drive this resonator as our level i does at ζ = "
-         + " / ".join(f"{100 * x:.3g} %" for x in pl["zeta_equivalent"])
-         + f"; its 2000 N sits at our top level's ratio at ζ = {100 * pl['zeta_for_top']:.3g} %, and at that "
+         + ". " + (("The paper's level i would drive this resonator as our level i does at ζ = "
+                    + " / ".join(f"{100 * x:.3g} %" for x in pl["zeta_equivalent"]) + "; its")
+                   if pl["zeta_equivalent"] else "The paper's")
+         + f" 2000 N sits at our top level's ratio at ζ = {100 * pl['zeta_for_top']:.3g} %, and at that "
          "damping its three levels are our top level × 1/4, 1/2, 1 (the paper's ratios): "
          + " / ".join(f"{x:.3g}" for x in pl["ratio_levels_N"])
          + " N. Every backbone's peak at those levels (SNMS, no forced FRF) beside the auto-rule levels "
