@@ -160,10 +160,20 @@ def paper_levels(data: ReportData) -> dict:
             "ratio_levels_N": ratio, "v_rq_um": data.v_rq, "peaks": peaks}
 
 
+def _json(x):
+    """``x`` with every NaN float replaced by None (summary.json stays strict JSON)."""
+    if isinstance(x, dict):
+        return {k: _json(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_json(v) for v in x]
+    return None if isinstance(x, float) and not np.isfinite(x) else x
+
+
 def section(data: ReportData) -> dict:
-    """``summary.json["like_for_like"]``: element_set, split, paper_levels."""
-    return {"element_set": element_set(data), "split": split(data),
-            "paper_levels": paper_levels(data)}
+    """``summary.json["like_for_like"]``: element_set, split, paper_levels (None where a peak is
+    not on its backbone)."""
+    return _json({"element_set": element_set(data), "split": split(data),
+                  "paper_levels": paper_levels(data)})
 
 
 def warnings(s: dict) -> list[dict]:
@@ -178,7 +188,8 @@ def warnings(s: dict) -> list[dict]:
     top = list(closing)[-1]
     row = (lf.get("split") or {}).get("levels", {}).get(top, {})
     a, b = row.get("v2"), row.get("v2-keep")
-    effect = ("no v2-keep backbone quantifies what that changes" if not (a and b) else
+    known = a and b and all(a[k] is not None and b[k] is not None for k in ("hz", "amplitude", "zeta"))
+    effect = ("no v2-keep backbone quantifies what that changes" if not known else
               f"keeping them (v2-keep) moves v2's {top} peak by {100 * (b['hz'] / a['hz'] - 1):+.2f} % "
               f"in f, {100 * (b['amplitude'] / a['amplitude'] - 1):+.1f} % in amplitude and "
               f"{100 * (b['zeta'] / a['zeta'] - 1):+.1f} % in ζ")
@@ -194,7 +205,12 @@ def warnings(s: dict) -> list[dict]:
 
 def _f(x, f: str = "{:.4g}") -> str:
     """``x`` formatted, an en dash for None or NaN."""
-    return "–" if x is None or not np.isfinite(x) else f.format(x)
+    return "–" if x is None or not np.isfinite(x) else f.format(x)  # None: NaN in summary.json
+
+
+def _um(x):
+    """mm → µm; None stays None (a peak not on its backbone)."""
+    return None if x is None else 1e3 * x
 
 
 def _element_set_md(es: dict, sp: dict) -> list[str]:
@@ -232,7 +248,7 @@ def _element_set_md(es: dict, sp: dict) -> list[str]:
           "|---|" + "---|" * len(SPLIT),
           "| stuck | " + " | ".join(f"{st[n]:.3f} / – / –" for n in SPLIT) + " |"]
     for lvl, row in sp["levels"].items():
-        cells = [("–" if n not in row else f"{_f(row[n]['hz'], '{:.3f}')} / {_f(1e3 * row[n]['amplitude'])} / "
+        cells = [("–" if n not in row else f"{_f(row[n]['hz'], '{:.3f}')} / {_f(_um(row[n]['amplitude']))} / "
                   f"{_f(row[n]['zeta'], '{:.3e}')}") for n in SPLIT]
         L.append(f"| {lvl} ({row['level']:.3g} N) | " + " | ".join(cells) + " |")
     return L + [""]
@@ -258,7 +274,7 @@ def _levels_md(pl: dict) -> list[str]:
          "| backbone | auto: f [Hz] / X [µm] / ζ per level | paper ratios 1:2:4: f [Hz] / X [µm] / ζ per level |",
          "|---|---|---|"]
     for name, v in pl["peaks"].items():
-        cell = [", ".join(f"{_f(p['hz'], '{:.2f}')} / {_f(1e3 * p['amplitude'])} / {_f(p['zeta'], '{:.2e}')}"
+        cell = [", ".join(f"{_f(p['hz'], '{:.2f}')} / {_f(_um(p['amplitude']))} / {_f(p['zeta'], '{:.2e}')}"
                           for p in v[k]) for k in ("auto", "ratios")]
         L.append(f"| {name} | {cell[0]} | {cell[1]} |")
     return L + [""] + _trends(pl) + [""]
