@@ -139,3 +139,30 @@ def slip_onset(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: Joint
 
     return {"onset": onset, "macroslip": float(macroslip), "first_slip": float(onset[c].min()),
             "quantile": quantile, "frequency": lin.frequency}
+
+
+def closure_onset(lin: LinearJoint, pair_dofs: np.ndarray, joint: JointModel,
+                  excitation_dof: int) -> np.ndarray:
+    """Response amplitude at which each element open at rest first closes, in the stuck mode.
+
+    In the stuck mode φ (the loaded elements are springs, the open ones carry nothing) an element
+    open at rest with gap g sees the normal relative displacement a·Δφ_n cos ωt at modal amplitude
+    a, so it touches once a |Δφ_n| ≥ g, i.e. at the response amplitude X = a |φ_e| =
+    g |φ_e| / |Δφ_n| at the excitation DOF. A linear estimate (slip elsewhere changes the shape),
+    used to say which open elements a level can close.
+
+    Args:
+        lin: the stuck modes of the joint (mode of interest at ``lin.mode_index``).
+        pair_dofs: (ne, 2, 3) reduced DOFs of sides A and B for (t1, t2, n).
+        joint: the configuration (its gaps, mm; loaded elements are not "open").
+        excitation_dof: the DOF whose amplitude X measures the response.
+    Returns:
+        (ne,) X at first closure, mm (inf for loaded elements and those the mode does not move
+        normally).
+    """
+    phi = np.append(lin.modes[:, lin.mode_index], 0.0)     # index -1 (ground) reads the 0
+    un = np.abs(phi[pair_dofs[:, 0, 2]] - phi[pair_dofs[:, 1, 2]])
+    out = np.full(len(joint.area), np.inf)
+    o = ~joint.closed & (un > 0)
+    out[o] = joint.gap[o] * abs(phi[excitation_dof]) / un[o]
+    return out

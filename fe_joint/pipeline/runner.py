@@ -41,7 +41,7 @@ STAGE_INPUTS: dict[str, tuple[tuple[str, ...], str]] = {
     "fe": (("geometry", "material", "preload", "reduction"), "1"),
     # the BEM grid spans the overlap (geometry) and uses the elastic constants (material)
     "contact": (("geometry", "material", "roughness"), "2"),
-    "dynamics": (("geometry", "material", "roughness", "contact") + _DYNAMICS_CURVES, "7"),
+    "dynamics": (("geometry", "material", "roughness", "contact") + _DYNAMICS_CURVES, "8"),
     "speed": (("geometry", "material", "roughness", "contact", "dynamics"), "1"),
     # the report reads every section (titles, tables, the paper comparison)
     "report": (("geometry", "material", "preload", "reduction", "roughness", "contact",

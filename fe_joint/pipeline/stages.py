@@ -19,7 +19,8 @@ from ..study import variants
 from ..study import jobs as study
 from ..study.artifacts import (CurveKey, load_artifact, load_backbones, load_curves, read_json_artifact,
                                rq_label, v3_pass0_file)
-from ..study.configurations import choose_levels, fixed_joints, joint_baseline
+from ..study.configurations import (choose_levels, fixed_joints, joint_baseline,
+                                    like_for_like_joints)
 from ..study.frf import CurveResult, SweepSettings
 from ..study.queue import run_jobs
 from . import guards
@@ -162,6 +163,7 @@ def stage_dynamics(ctx: StageContext) -> dict:
     setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
     surfaces, extra = _surfaces(ctx)
     joints = fixed_joints(setup, surfaces, extra["kn_smooth"], c)
+    joints.update(like_for_like_joints(joints, c.material.poisson))   # backbones only (item 8)
     f_lin = {name: stuck_modes(rm.K, rm.M, rm.pair_dofs, j).frequency for name, j in joints.items()}
     levels, level_info = choose_levels(rm, joints["baseline"], c)
     # before any work: a level absurdly beyond gross slip is an input error, one beyond it a warning

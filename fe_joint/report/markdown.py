@@ -5,7 +5,7 @@ import numpy as np
 
 from ..model.interface_motion import RIGID_NAMES
 from ..study.artifacts import rq_label
-from . import backbones
+from . import backbones, like_for_like
 from .data import PAPER, ReportData
 
 
@@ -195,7 +195,8 @@ def report_markdown(data: ReportData, summary: dict) -> str:
          + _damping(data, summary) + _contact(data, summary) + _contact_area(data, summary)
          + _seeds(data, summary) + _hardness(data, summary) + _state_figures()
          + _joint_state(summary) + _interface_motion(summary)
-         + _v3(summary) + backbones.markdown(data, summary) + _cost(summary) + _speed(data.speed))
+         + _v3(summary) + backbones.markdown(data, summary)
+         + like_for_like.markdown(data, summary) + _cost(summary) + _speed(data.speed))
     return "\n".join(L) + "\n"
 
 

@@ -11,6 +11,7 @@ from .damping import damping_by_curve, slip_onsets
 from .joint_state import interface_motions, joint_shear, stuck_modes_by_configuration
 from ..study.artifacts import rq_label, v3_job_name
 from ..study.frf import CurveResult
+from . import like_for_like
 from .backbones import backbones_section
 from .data import STAGES_READ, ReportData
 from .stiffness import configuration_joints, k_eq_table, rq_joints
@@ -121,6 +122,8 @@ def build_summary(data: ReportData) -> dict:
         summary["hardness_variant"] = data.hardness
     if data.backbones:
         summary["backbones"] = backbones_section(data)
+    summary["like_for_like"] = like_for_like.section(data)
+    summary["warnings"] += like_for_like.warnings(summary)
     if data.speed:
         summary["speed_vs_error"] = data.speed
     return summary

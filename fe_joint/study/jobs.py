@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model.joint import JointModel
+from .configurations import LIKE_FOR_LIKE
 from .artifacts import (BACKBONE_DIR, BackboneKey, CurveKey, check_files, digest, file_record,
                         load_artifact, load_curves, v3_job_name, v3_pass0_file)
 from .contact import InterfaceSetup
@@ -335,11 +336,15 @@ def v3_surfaces(case) -> list[float]:
 
 
 def backbone_jobs(case) -> list[Job]:
-    """One backbone per fixed configuration and per v3 surface, v3 first (they need the v3 fixed
+    """One backbone per fixed configuration and per v3 surface, v3 first, and one per
+    like-for-like joint when v1 and v2 are compared (they need the v3 fixed
     points' converged stiffnesses, so they run after the FRF jobs: :func:`run_backbone_job`)."""
     out = [Job(kind="backbone", config="v3", level_index=None, rq_um=rq) for rq in v3_surfaces(case)]
     out += [Job(kind="backbone", config=c, level_index=None)
             for c in case.dynamics.configurations if c != "v3"]
+    # the like-for-like joints of v1 → v2 (issue 13, item 8): backbones only, no forced FRF
+    if {"v1", "v2"} <= set(case.dynamics.configurations):
+        out += [Job(kind="backbone", config=c, level_index=None) for c in LIKE_FOR_LIKE]
     return out
 
 
@@ -362,13 +367,19 @@ def backbone_plan(inp: StudyInputs, folder: Path, job: Job):
         f_lin = float(rec["f_lin"])
     else:
         joint, f_lin = inp.joints[job.config], float(inp.f_lin[job.config])
+    # a like-for-like joint has no forced curve: its range covers the joints it lies between
+    # (v1 and v2), since removing or adding closing elements moves its peak towards either
+    configs = set(LIKE_FOR_LIKE.values()) if job.config in LIKE_FOR_LIKE else {job.config}
     curves = [cr for k, cr in load_curves(folder).items()
-              if k.config == job.config and k.level_index is not None
+              if k.config in configs and k.level_index is not None
               and (k.rq_um == job.rq_um if job.config == "v3" else True)]
     if not curves:
         raise ValueError(f"backbone of {job.name}: no forced curve of that joint in {folder}")
-    hi = max(curves, key=lambda cr: cr.level)
-    return joint, f_lin, hi.peak_amplitude * top / hi.level
+    amp = {}
+    for cr in curves:      # per joint, its curve at the highest level it was swept at
+        if cr.config not in amp or cr.level > amp[cr.config][0]:
+            amp[cr.config] = (cr.level, cr.peak_amplitude)
+    return joint, f_lin, max(a * top / lv for lv, a in amp.values())
 
 
 def run_backbone_job(inp: StudyInputs, folder: Path, job: Job) -> dict:
