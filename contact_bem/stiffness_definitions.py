@@ -39,8 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import finite_array, positive_scalar
-from .stiffness import (_AX, _along, _check_patches, _normal_tangent, _patch_halfspace, _patch_normal,
-                        _stuck_matrix, _unit_dir)
+from .stiffness import (_AX, _along, _check_patches, _normal_tangent, _patch_halfspace, _patch_kn,
+                        _patch_normal, _stuck_matrix, _unit_dir)
 from .tangential import pk_tangential_compacting
 
 #: complete contact: k_layer ≤ LAYER_CAP · k_bulk (the springs add ≤ 1 % of the bulk compliance)
@@ -107,6 +107,7 @@ class LoopStiffness:
     """Tangential stiffness of patches from their loop ±Q at fixed pressure (arrays (np,)).
 
     Attributes:
+        k_n: normal stiffness (dN/dδ)/A at the load, N/mm³ (``patch_normal_stiffness``).
         stick: slope at load reversal per area, N/mm³.
         secant: Q/δ_v(Q) per area, N/mm³ (= stick where Q = 0).
         energy: Q²/(2∫₀^Q δ_v dq) per area, N/mm³ (the Jenkins element of the same loop area).
@@ -115,6 +116,7 @@ class LoopStiffness:
         force: |Q| used (after clipping), N.
         clipped: |Q| was clipped to max_ratio·μN.
     """
+    k_n: np.ndarray
     stick: np.ndarray
     secant: np.ndarray
     energy: np.ndarray
@@ -167,7 +169,7 @@ def patch_loop_stiffness(patches, cell_size, young: float, poisson: float, mu: f
     secant = np.where(live, q / np.where(live, delta[:, -1], 1.0) / A, stick / A)
     energy = np.where(live, q ** 2 / (2 * np.where(live, integral, 1.0)) / A, stick / A)
     diss = np.where(live, 4 * q * delta[:, -1] - 8 * integral, 0.0)
-    return LoopStiffness(stick / A, secant, energy, diss, delta[:, -1], q, clipped)
+    return LoopStiffness(_patch_kn(hs, p), stick / A, secant, energy, diss, delta[:, -1], q, clipped)
 
 
 def _virgin_curve(hs, R, e, q, n, tol, live) -> np.ndarray:

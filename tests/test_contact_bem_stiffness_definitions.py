@@ -121,7 +121,7 @@ def test_loop_stiffness_of_rough_patches():
     cell = (gp.dx, gp.dy)
     L = patch_loop_stiffness(P, cell, E, NU, MU, loads, q)
     ps = patch_stiffness(P, cell, E, NU, MU, loads, q, tangential_tol=1e-7)
-    assert np.allclose(L.stick, ps.k_t, rtol=1e-9)
+    assert np.allclose(L.stick, ps.k_t, rtol=1e-9) and np.allclose(L.k_n, ps.k_n, rtol=1e-9)
     live = slice(2, None)
     assert np.allclose(L.secant[live], ps.k_t_secant[live], rtol=2e-3)   # Masing: the same loop tips
     assert np.all(L.secant[live] < L.energy[live]) and np.all(L.energy[live] < L.stick[live])

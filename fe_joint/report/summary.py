@@ -12,6 +12,7 @@ from .joint_state import interface_motions, joint_shear, stuck_modes_by_configur
 from ..study.artifacts import rq_label, v3_job_name
 from ..study.frf import CurveResult
 from .backbones import backbones_section
+from .stiffness_definitions import section as stiffness_definitions_section
 from .data import STAGES_READ, ReportData
 from .stiffness import configuration_joints, k_eq_table, rq_joints
 
@@ -121,6 +122,7 @@ def build_summary(data: ReportData) -> dict:
         summary["hardness_variant"] = data.hardness
     if data.backbones:
         summary["backbones"] = backbones_section(data)
+    summary["stiffness_definitions"] = stiffness_definitions_section(data)
     if data.speed:
         summary["speed_vs_error"] = data.speed
     return summary
