@@ -208,7 +208,8 @@ def alternative_joints(inp, loops: dict, v3: dict, bulk: BulkStiffness) -> dict:
     if "v3" in cfgs and v_rq in loops and v_rq in v3:
         sc, v = inp.surfaces[v_rq], v3[v_rq]
         for k in ("secant", "energy"):
-            kt = np.where(v["kn"] > 0, loops[v_rq][k], 0.0)
+            # an element the loop found without load keeps v3's own k_t (never a zero spring)
+            kt = np.where(v["kn"] > 0, np.where(loops[v_rq][k] > 0, loops[v_rq][k], v["kt"]), 0.0)
             out[AltJob(f"v3-{k}", v_rq, "v3")] = JointModel(
                 f"v3-{k}", n0=sc.n0, gap=sc.gap_el, kn=v["kn"], kt=kt, area=inp.setup.area, rq_um=v_rq)
     return out
