@@ -126,13 +126,13 @@ def _kn_finding(s: dict) -> str:
 def _kt_table(s: dict) -> list[str]:
     c = s["contact"]
     loops = s.get("loops") or {}
-    L = ["| Rq [µm] | reversal k_t/k_n at N0 (contact stage) | v3 converged k_t/k_n (k_t,eq/k_n,eq) "
+    L = ["| Rq [µm] | reversal k_t/k_n at N0 (contact stage) | v3 converged k_t/k_n: mean (min–max); k_t,eq/k_n,eq "
          "| stick / Mindlin at the v3 peak | secant / Mindlin | energy / Mindlin "
          "| k_t,eq stick · secant · energy / Mindlin's |", "|---|---|---|---|---|---|---|"]
     for lab, r in c["reversal_ratio"].items():
         v3 = s["v3_kt_over_kn"].get(lab)
         lp = loops.get(lab)
-        v3t = "–" if v3 is None else f"{v3['mean']:.4f} ({v3['min']:.3f}–{v3['max']:.3f}) ({v3['eq_ratio']:.4f})"
+        v3t = "–" if v3 is None else f"{v3['mean']:.4f} ({v3['min']:.3f}–{v3['max']:.3f}); eq {v3['eq_ratio']:.4f}"
         cells = ["–"] * 4
         if lp is not None:
             cells = [_stat(lp[k]["over_mindlin"]) for k in KT_DEFINITIONS]
@@ -234,7 +234,7 @@ def figure(data: ReportData, path: Path) -> Path | None:
     for ax, (title, v) in zip(axes[0], top):
         _map(ax, xy, v[live], f"{title} [N/mm³]", vmin=0, vmax=vmax, hole=hole)
     for ax, k, r in zip(axes[1][2:], KT_DEFINITIONS, ratios):
-        _map(ax, xy, r, f"k_t {k} / Mindlin", cmap="RdBu", vmin=1 - span, vmax=1 + span, hole=hole)
+        _map(ax, xy, r, f"k_t {k} / Mindlin", cmap="coolwarm_r", vmin=1 - span, vmax=1 + span, hole=hole)
     for ax in axes[1][:2]:
         ax.axis("off")
     axes[1][0].text(0, 0.5, f"Rq = {rq_label(data.v_rq)} µm, v3 peak at L{data.mid}\n"

@@ -217,13 +217,16 @@ def alternative_joints(inp, loops: dict, v3: dict, bulk: BulkStiffness) -> dict:
 
 def top_peak(curves: dict, parent: str, rq_um: float | None, top_level: float) -> float:
     """The parent joint's forced peak amplitude (mm) at its highest swept level, scaled linearly
-    to ``top_level`` (N): where the alternative backbone ends (as ``jobs.backbone_plan``)."""
-    mine = [cr for k, cr in curves.items() if k.config == parent and k.level_index is not None
-            and (parent != "v3" or k.rq_um == rq_um)]
-    if not mine:
-        raise ValueError(f"no forced curve of {parent} for an alternative backbone")
-    hi = max(mine, key=lambda cr: cr.level)
-    return hi.peak_amplitude * top_level / hi.level
+    to ``top_level`` (N): where the alternative backbone ends (as ``jobs.backbone_plan``). Without
+    a curve of the parent, the largest such amplitude of any configuration (a wider range)."""
+    forced = [(k, cr) for k, cr in curves.items() if k.level_index is not None]
+    mine = [cr for k, cr in forced if k.config == parent and (parent != "v3" or k.rq_um == rq_um)]
+    if not mine and not forced:
+        raise ValueError(f"no forced curve for the alternative backbone of {parent}")
+    if mine:
+        hi = max(mine, key=lambda cr: cr.level)
+        return hi.peak_amplitude * top_level / hi.level
+    return max(cr.peak_amplitude * top_level / cr.level for _, cr in forced)
 
 
 def _v3_arrays(folder: Path, case, comm) -> dict:
