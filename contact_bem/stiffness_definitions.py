@@ -13,9 +13,11 @@ patch in complete contact *is* that punch, so k_layer = ∞ exactly there (a uni
 8 % more compliant for a circle, would leave a spurious finite layer stiffness ≈ 13 k_bulk in
 complete contact); (ii) a spring between two FE nodes is a displacement constraint between the
 tributary areas in the stuck limit, i.e. a punch, not a prescribed pressure. Sparse contact:
-k_n ≪ k_bulk and k_layer → k_n. Complete contact: k_layer is capped at ``LAYER_CAP`` × k_bulk
-(the springs then add 1 % of the bulk's own compliance: the joint is tied to 1 %; an unbounded
-spring only makes the dynamics stiff). The same split on the stuck tangential stiffness gives the
+k_n ≪ k_bulk and k_layer → k_n. Complete contact: k_layer is capped at ``LAYER_CAP`` = 10 × k_bulk
+(the springs then add 10 % of the patch bulk's compliance; on the resonator the stuck frequency is
+within 0.12 % of the tied limit, 250.31 vs 250.62 Hz at 1000 k_bulk; at 100 k_bulk the harmonic
+balance's base is so stiff that hbm's relative rigid-mode threshold, 1e-9 · max K/M, takes the
+breathing mode for a rigid-body mode). The same split on the stuck tangential stiffness gives the
 tangential layer.
 
 **Tangential: three readings of the hysteresis loop** under a force cycle ±Q at fixed normal
@@ -43,8 +45,8 @@ from .stiffness import (_AX, _along, _check_patches, _normal_tangent, _patch_hal
                         _patch_normal, _stuck_matrix, _unit_dir)
 from .tangential import pk_tangential_compacting
 
-#: complete contact: k_layer ≤ LAYER_CAP · k_bulk (the springs add ≤ 1 % of the bulk compliance)
-LAYER_CAP = 100.0
+#: complete contact: k_layer ≤ LAYER_CAP · k_bulk (the springs add ≤ 10 % of the bulk compliance)
+LAYER_CAP = 10.0
 
 
 @dataclass(frozen=True)

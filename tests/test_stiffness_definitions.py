@@ -18,7 +18,7 @@ def test_layer_joint_keeps_loads_and_the_kt_rule():
     assert lay.kn == pytest.approx([0.0, LAYER_CAP * kb, kb / 9], rel=1e-12)
     assert lay.kt == pytest.approx(mindlin_ratio(0.3) * lay.kn, rel=1e-12)
     assert lay.name == "v2-layer" and np.array_equal(lay.n0, j.n0)
-    assert layer_joint(j, bulk, 1.0, cap=10.0).kn[1] == pytest.approx(10 * kb)
+    assert layer_joint(j, bulk, 1.0, cap=1000.0).kn[1] == pytest.approx(1000 * kb)
 
 
 def test_loop_statistics_over_loaded_elements():

@@ -113,8 +113,10 @@ def _kn_finding(s: dict) -> str:
            f"{b['cells']}² cells; paper max {PAPER['kn_smooth_max']:.3g}), so its k_n measures the "
            f"patch size, not the interface. Without the bulk the smooth interface is tied "
            f"(layer capped at {c['cap']:g} k_bulk; stuck f {sm['stuck_hz']:.2f} → {sl['stuck_hz']:.2f} Hz; "
-           f"caps 10 / 100 / 1000 give " + " / ".join(f"{x:.2f}" for x in c["cap_sensitivity_hz"].values())
-           + " Hz, so the tied limit is reached).")
+           f"caps " + " / ".join(c["cap_sensitivity_hz"]) + " k_bulk give "
+           + " / ".join(f"{x:.2f}" for x in c["cap_sensitivity_hz"].values())
+           + f" Hz: the cap used is {100 * abs(sl['stuck_hz'] / max(c['cap_sensitivity_hz'].values()) - 1):.2f} % "
+           "from the stiffest, the tied limit).")
     if v in J and f"{v}-layer" in J:
         a, la = J[v], J[f"{v}-layer"]
         txt += (f" On the rough comparison surface the bulk is a smaller share: v2's k_n,eq "
