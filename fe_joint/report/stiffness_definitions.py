@@ -38,8 +38,13 @@ def _parent_key(parent: str, rq_um) -> BackboneKey:
     return BackboneKey(parent, rq_um if parent == "v3" else None)
 
 
-def _snms(br) -> list:
-    return [[float(f), float(a)] for f, a in zip(br.snms_hz, br.snms_amplitude)]
+def _snms(br) -> dict:
+    """SNMS peaks [[Hz, mm] or None beyond the backbone, per level], whether the continuation
+    reached its end, and the largest response amplitude it reached (mm)."""
+    peaks = [[float(f), float(a)] if np.isfinite(f) and np.isfinite(a) else None
+             for f, a in zip(br.snms_hz, br.snms_amplitude)]
+    return {"peaks": peaks, "complete": bool(br.complete),
+            "reached_mm": float(br.displacement_amplitude[-1])}
 
 
 def section(data: ReportData) -> dict:
@@ -77,7 +82,11 @@ def _stat(st: dict, f: str = "{:.3f}") -> str:
 
 
 def _peaks(p) -> str:
-    return "–" if not p else " · ".join(f"{f:.2f} / {1e3 * a:.4g}" for f, a in p)
+    """SNMS peaks of a backbone entry (:func:`_snms`) as text; '–' without a backbone."""
+    if not p:
+        return "–"
+    txt = " · ".join("beyond" if x is None else f"{x[0]:.2f} / {1e3 * x[1]:.4g}" for x in p["peaks"])
+    return txt if p["complete"] else f"{txt} (backbone stops at {1e3 * p['reached_mm']:.3g} µm)"
 
 
 def _kn_table(s: dict) -> list[str]:
@@ -122,7 +131,28 @@ def _kn_finding(s: dict) -> str:
         txt += (f" On the rough comparison surface the bulk is a smaller share: v2's k_n,eq "
                 f"{a['kn_eq']:.3g} → {la['kn_eq']:.3g} N/mm³ ({100 * (la['kn_eq'] / a['kn_eq'] - 1):+.0f} %), "
                 f"stuck f {a['stuck_hz']:.2f} → {la['stuck_hz']:.2f} Hz.")
+    txt += _frf_sentence(s, ("smooth-ms-layer", "v2-layer"))
     return txt
+
+
+def _frf_sentence(s: dict, names: tuple) -> str:
+    """' In the FRFs (SNMS at L<mid>): <alt> f / amp vs its parent's ...' for the alternatives
+    whose backbone and parent's reach the middle level ('' when none does)."""
+    alt = s.get("alternatives") or {}
+    parts = []
+    for n in names:
+        a = alt.get(n) or {}
+        mine, par = a.get("snms"), a.get("parent_snms")
+        if not mine or not par:
+            continue
+        m = len(mine["peaks"]) // 2
+        x, y = mine["peaks"][m], par["peaks"][m]
+        if x is None or y is None:
+            parts.append(f"{n}: no SNMS peak at L{m} (backbone stops at {1e3 * mine['reached_mm']:.3g} µm)")
+            continue
+        parts.append(f"{n} {x[0]:.2f} Hz / {1e3 * x[1]:.4g} µm against {a['parent']}'s {y[0]:.2f} Hz / "
+                     f"{1e3 * y[1]:.4g} µm ({100 * (x[1] / y[1] - 1):+.0f} % in amplitude)")
+    return (" In the FRFs (SNMS peak at the middle level): " + "; ".join(parts) + ".") if parts else ""
 
 
 def _kt_table(s: dict) -> list[str]:
@@ -169,6 +199,7 @@ def _kt_finding(s: dict) -> str:
                 f"{eq['energy']:.3f} ×), lowest where the elements slip most; neither keeps k_t,eq at "
                 f"Mindlin's, so the paper's two statements (same average, local differences) are not "
                 f"both met by one definition here.")
+    txt += _frf_sentence(s, tuple(n for n in (s.get("alternatives") or {}) if n.startswith("v3-")))
     return txt
 
 
