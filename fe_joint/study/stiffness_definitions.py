@@ -34,13 +34,15 @@ from contact_bem import (LAYER_CAP, BulkStiffness, layer_stiffness, mindlin_rati
                          patch_loop_stiffness, patch_stiffness)
 
 from ..model.joint import JointModel, stuck_modes
-from .artifacts import BackboneKey, CurveKey, rq_label, v3_job_name
+from .artifacts import BackboneKey, CurveKey, check_files, digest, file_record, rq_label, v3_job_name
 from .configurations import joint_v2
 from .contact import InterfaceSetup, _gather_concat, _split, element_patches
 from .variants import statistics, stuck_frequency, write_json
 
 #: the folder (under dynamics/) of the loop definitions and the alternative backbones
 FOLDER = "stiffness_definitions"
+#: bump when an alternative backbone's result changes for the same inputs (its cache key does)
+BACKBONE_VERSION = "1"
 #: caps of the layer stiffness (× k_bulk) whose smooth-ms stuck frequency is reported
 CAP_SENSITIVITY = (10.0, 100.0, 1000.0)
 
@@ -245,7 +247,9 @@ def _v3_arrays(folder: Path, case, comm) -> dict:
 
 def dynamics_study(inp, folder: Path, comm=None, progress=None) -> dict:
     """The loop definitions on every v3 surface and the alternative joints' backbones (collective;
-    the backbones run on the stage's job queue, rank 0 writes).
+    the backbones run on the stage's job queue, rank 0 writes). A backbone whose cache key
+    (:func:`_backbone_key`: reduced model, joint, stuck frequency, amplitude range, levels,
+    settings) and file match what is on disk is kept, so a rerun computes only what changed.
 
     Args:
         inp: the dynamics stage's StudyInputs (after the v3 and FRF jobs have finished).
@@ -279,6 +283,11 @@ def dynamics_study(inp, folder: Path, comm=None, progress=None) -> dict:
     joints = {job.name: {"parent": job.parent, "rq_um": job.rq_um, "kn_eq": j.k_eq("kn"),
                          "kt_eq": j.k_eq("kt"), "stuck_hz": plan[job.name][1]}
               for job, j in alts.items()}
+    keys = {n: _backbone_key(inp, *p) for n, p in plan.items()}
+    todo = [j for j in alts if not _cached(sub, j.name, keys[j.name])] if (
+        comm is None or comm.rank == 0) else None
+    if comm is not None:
+        todo = comm.bcast(todo, root=0)
 
     def run_one(job):
         joint, f_lin, a_top = plan[job.name]
@@ -289,16 +298,33 @@ def dynamics_study(inp, folder: Path, comm=None, progress=None) -> dict:
         br = r["backbone"]
         br.save(Path(fold) / f"{job.name}.npz")
         (Path(fold) / f"{job.name}.json").write_text(json.dumps(
-            {"job": job.name, "parent": job.parent, "seconds": br.seconds}, default=float))
+            {"job": job.name, "parent": job.parent, "seconds": br.seconds, "key": keys[job.name],
+             "files": file_record(fold, [Path(fold) / f"{job.name}.npz"])}, default=float))
     if comm is None or comm.rank == 0:
         sub.mkdir(parents=True, exist_ok=True)
-    run_jobs(run_one, write_one, list(alts), sub, comm, progress, skip_done=False)
+    run_jobs(run_one, write_one, todo, sub, comm, progress, skip_done=False)
     summary = {"surfaces": stats, "backbones": [j.name for j in alts], "joints": joints}
     if comm is None or comm.rank == 0:
         arrays = {rq_label(rq): {"rq_um": rq, **{k: np.asarray(v).tolist() for k, v in d.items()}}
                   for rq, d in loops.items()}
         write_json(sub / "kt_definitions.json", {"summary": summary, "arrays": arrays})
     return summary
+
+
+def _backbone_key(inp, joint: JointModel, f_lin: float, a_top: float) -> str:
+    """Cache key of an alternative backbone: everything ``compute_backbone`` reads."""
+    from .jobs import rm_digest
+    return digest(BACKBONE_VERSION, rm_digest(inp.rm), joint, float(f_lin), float(a_top),
+                  [float(x) for x in inp.levels], inp.settings)
+
+
+def _cached(sub: Path, name: str, key: str) -> bool:
+    """An alternative backbone on disk with this key and an intact file (rank 0)."""
+    try:
+        rec = json.loads((Path(sub) / f"{name}.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return rec.get("key") == key and "files" in rec and check_files(sub, rec["files"]) is None
 
 
 def files(folder: Path, summary: dict) -> list[Path]:
