@@ -261,31 +261,42 @@ def dynamics_study(inp, folder: Path, comm=None, progress=None) -> dict:
         parent, rq_um, kn_eq, kt_eq (N/mm³), stuck_hz}}.
     """
     from .artifacts import load_curves
-    from .backbone import compute_backbone
-    from .queue import run_jobs
     sub = Path(folder) / FOLDER
     mid = len(inp.levels) // 2
     curves = load_curves(folder) if (comm is None or comm.rank == 0) else None
     if comm is not None:
         curves = comm.bcast(curves, root=0)
     v3 = _v3_arrays(folder, inp.case, comm)
-    loops, stats = {}, {}
-    for rq in sorted(v3):
-        cr = curves.get(CurveKey("v3", mid, rq))
-        if cr is None:
-            continue
-        loops[rq] = loop_definitions(inp.setup, inp.surfaces[rq], cr, inp.case.contact.mu, comm)
-        stats[rq_label(rq)] = {"rq_um": rq, **loop_statistics(loops[rq], inp.setup.area)}
+    loops = {rq: loop_definitions(inp.setup, inp.surfaces[rq], curves[CurveKey("v3", mid, rq)],
+                                  inp.case.contact.mu, comm)
+             for rq in sorted(v3) if CurveKey("v3", mid, rq) in curves}
+    stats = {rq_label(rq): {"rq_um": rq, **loop_statistics(d, inp.setup.area)} for rq, d in loops.items()}
     alts = alternative_joints(inp, loops, v3, bulk_stiffness(inp.setup))
     plan = {job.name: (joint, stuck_modes(inp.rm.K, inp.rm.M, inp.rm.pair_dofs, joint).frequency,
                        top_peak(curves, job.parent, job.rq_um, inp.levels[-1]))
             for job, joint in alts.items()}
+    if comm is None or comm.rank == 0:
+        sub.mkdir(parents=True, exist_ok=True)
+    _run_backbones(inp, sub, list(alts), plan, comm, progress)
     joints = {job.name: {"parent": job.parent, "rq_um": job.rq_um, "kn_eq": j.k_eq("kn"),
                          "kt_eq": j.k_eq("kt"), "stuck_hz": plan[job.name][1]}
               for job, j in alts.items()}
+    summary = {"surfaces": stats, "backbones": [j.name for j in alts], "joints": joints}
+    if comm is None or comm.rank == 0:
+        arrays = {rq_label(rq): {"rq_um": rq, **{k: np.asarray(v).tolist() for k, v in d.items()}}
+                  for rq, d in loops.items()}
+        write_json(sub / "kt_definitions.json", {"summary": summary, "arrays": arrays})
+    return summary
+
+
+def _run_backbones(inp, sub: Path, jobs: list, plan: dict, comm, progress) -> None:
+    """Run the backbones of ``jobs`` not cached in ``sub`` on the job queue; rank 0 writes each
+    as ``<name>.npz`` and ``<name>.json`` (its key and file record)."""
+    from .backbone import compute_backbone
+    from .queue import run_jobs
     keys = {n: _backbone_key(inp, *p) for n, p in plan.items()}
-    todo = [j for j in alts if not _cached(sub, j.name, keys[j.name])] if (
-        comm is None or comm.rank == 0) else None
+    todo = ([j for j in jobs if not _cached(sub, j.name, keys[j.name])]
+            if comm is None or comm.rank == 0 else None)
     if comm is not None:
         todo = comm.bcast(todo, root=0)
 
@@ -295,20 +306,12 @@ def dynamics_study(inp, folder: Path, comm=None, progress=None) -> dict:
                                              inp.settings)}
 
     def write_one(fold, job, r):
-        br = r["backbone"]
-        br.save(Path(fold) / f"{job.name}.npz")
+        r["backbone"].save(Path(fold) / f"{job.name}.npz")
         (Path(fold) / f"{job.name}.json").write_text(json.dumps(
-            {"job": job.name, "parent": job.parent, "seconds": br.seconds, "key": keys[job.name],
-             "files": file_record(fold, [Path(fold) / f"{job.name}.npz"])}, default=float))
-    if comm is None or comm.rank == 0:
-        sub.mkdir(parents=True, exist_ok=True)
+            {"job": job.name, "parent": job.parent, "seconds": r["backbone"].seconds,
+             "key": keys[job.name], "files": file_record(fold, [Path(fold) / f"{job.name}.npz"])},
+            default=float))
     run_jobs(run_one, write_one, todo, sub, comm, progress, skip_done=False)
-    summary = {"surfaces": stats, "backbones": [j.name for j in alts], "joints": joints}
-    if comm is None or comm.rank == 0:
-        arrays = {rq_label(rq): {"rq_um": rq, **{k: np.asarray(v).tolist() for k, v in d.items()}}
-                  for rq, d in loops.items()}
-        write_json(sub / "kt_definitions.json", {"summary": summary, "arrays": arrays})
-    return summary
 
 
 def _backbone_key(inp, joint: JointModel, f_lin: float, a_top: float) -> str:
