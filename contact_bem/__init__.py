@@ -21,6 +21,8 @@ from .stiffness import (NormalStiffness, PatchStiffness, TangentialLoop, Tangent
                         load_approach_curve, mindlin_ratio, normal_stiffness, patch_normal_stiffness,
                         patch_stiffness, patch_tangential_stiffness, tangential_loop,
                         tangential_stiffness)
+from .stiffness_definitions import (LAYER_CAP, BulkStiffness, LoopStiffness, layer_stiffness,
+                                    patch_bulk_stiffness, patch_loop_stiffness)
 from .coupling import cell_average, extract_patches, macro_gap
 from . import reference
 
@@ -31,5 +33,6 @@ __all__ = [
     "TangentialLoop", "TangentialStiffness", "load_approach_curve", "mindlin_ratio",
     "normal_stiffness", "patch_normal_stiffness", "patch_stiffness", "patch_tangential_stiffness",
     "tangential_loop", "tangential_stiffness", "cell_average", "extract_patches", "macro_gap",
-    "reference",
+    "reference", "LAYER_CAP", "BulkStiffness", "LoopStiffness", "layer_stiffness",
+    "patch_bulk_stiffness", "patch_loop_stiffness",
 ]

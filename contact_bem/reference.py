@@ -105,6 +105,18 @@ def mindlin_initial_stiffness(a: float, g_star: float) -> float:
     return 8.0 * g_star * a
 
 
+def mindlin_secant_stiffness(q_star: float, mu: float, p: float, a: float, g_star: float) -> float:
+    """Secant 2Q*/Δδ of the Mindlin–Deresiewicz loop ±Q* = Q*/δ(Q*) (N/mm), ``mindlin_displacement``."""
+    return q_star / float(mindlin_displacement(q_star, mu, p, a, g_star))
+
+
+def mindlin_energy_stiffness(q_star: float, mu: float, p: float, a: float, g_star: float) -> float:
+    """The Jenkins element through the Mindlin–Deresiewicz loop's tips (±Q*, ±δ(Q*)) with the loop's
+    area W (``mindlin_dissipation``): W = 4Q*(δ(Q*) − Q*/k), so k = Q*/(δ(Q*) − W/(4Q*)) (N/mm)."""
+    d = float(mindlin_displacement(q_star, mu, p, a, g_star))
+    return q_star / (d - mindlin_dissipation(q_star, mu, p, a, g_star) / (4.0 * q_star))
+
+
 def flat_punch_stiffness(a: float, e_star: float) -> float:
     """Normal stiffness of a rigid circular flat punch of radius a: 2 a E* (N/mm)."""
     return 2.0 * a * e_star

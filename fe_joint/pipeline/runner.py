@@ -40,7 +40,7 @@ STAGE_INPUTS: dict[str, tuple[tuple[str, ...], str]] = {
     # are one stage: splitting them would factorize the 60k-DOF stiffness twice
     "fe": (("geometry", "material", "preload", "reduction"), "1"),
     # the BEM grid spans the overlap (geometry) and uses the elastic constants (material)
-    "contact": (("geometry", "material", "roughness"), "2"),
+    "contact": (("geometry", "material", "roughness"), "3"),
     "dynamics": (("geometry", "material", "roughness", "contact") + _DYNAMICS_CURVES, "8"),
     "speed": (("geometry", "material", "roughness", "contact", "dynamics"), "1"),
     # the report reads every section (titles, tables, the paper comparison)

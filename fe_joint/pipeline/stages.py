@@ -15,6 +15,7 @@ import numpy as np
 from ..model.joint import stuck_modes
 from ..model.reduced_model import ReducedModel
 from ..study import contact as ms
+from ..study import stiffness_definitions as stiff_defs
 from ..study import variants
 from ..study import jobs as study
 from ..study.artifacts import (CurveKey, load_artifact, load_backbones, load_curves, read_json_artifact,
@@ -106,6 +107,9 @@ def stage_contact(ctx: StageContext) -> dict:
     t0 = time.perf_counter()
     capped = variants.hardness_study(setup, rm, r, surfaces, comm=ctx.comm)
     t_capped = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    definitions = stiff_defs.contact_study(setup, rm, surfaces, kn_smooth, comm=ctx.comm)
+    t_defs = time.perf_counter() - t0
     if ctx.rank == 0:
         ctx.path("contact").mkdir(parents=True, exist_ok=True)
         ms.save_surfaces(ctx.path("contact", "surfaces.npz"), surfaces, extra={
@@ -113,10 +117,11 @@ def stage_contact(ctx: StageContext) -> dict:
             "flat_pressure": flat.pressure})
         variants.write_json(ctx.path("contact", "seeds.json"), seeds)
         variants.write_json(ctx.path("contact", "hardness.json"), capped)
+        variants.write_json(ctx.path("contact", "stiffness_definitions.json"), definitions)
     ctx.print(f"[fe-joint] contact: {r.seeds} seeds per Rq in {t_seeds:.1f} s, hardness-capped "
               f"sweep in {t_capped:.1f} s")
     return {
-        "seeds_seconds": t_seeds, "hardness_seconds": t_capped,
+        "seeds_seconds": t_seeds, "hardness_seconds": t_capped, "definitions_seconds": t_defs,
         "coupling_rel_error": coupling_err, "pressure_interpolation_scale": setup.pressure_scale,
         "grid": r.grid, "patch": r.patch, "patch_side_mm": setup.side,
         "surfaces": {rq_label(rq): _surface_summary(s) for rq, s in surfaces.items()},
@@ -213,11 +218,16 @@ def stage_dynamics(ctx: StageContext) -> dict:
         run(inp, later)
     run_jobs(lambda job: study.run_backbone_job(inp, folder, job), study.write_backbone_job,
              bb_jobs, folder, ctx.comm, tick, skip_done=False)
+    # the k_t definitions at the v3 peaks and the alternative joints' backbones (issue 13)
+    t0 = time.perf_counter()
+    defs = stiff_defs.dynamics_study(inp, folder, ctx.comm)
+    defs["seconds"] = time.perf_counter() - t0
     if bar is not None:
         bar.close()
-    ctx.files["dynamics"] = [folder / f for j in every + bb_jobs for f in j.files]
+    ctx.files["dynamics"] = ([folder / f for j in every + bb_jobs for f in j.files]
+                             + stiff_defs.files(folder, defs))
     summary: dict = {"levels": levels, "level_info": level_info, "f_lin": f_lin, "curves": {},
-                     "v3": {}}
+                     "v3": {}, "stiffness_definitions": defs}
     if ctx.rank == 0:
         curves = load_curves(folder, sorted(k.name for j in every for k in j.curve_keys))
         summary["curves"] = {k.name: _curve_summary(cr) for k, cr in curves.items()}

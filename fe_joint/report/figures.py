@@ -311,6 +311,7 @@ FIGURES: dict[str, Callable[[ReportData, Path], Path | None]] = {
     "keq_contact_fraction": keq_contact_fraction,
     "backbone_frequency": lambda data, path: _backbones().backbone_frequency(data, path),
     "backbone_damping": lambda data, path: _backbones().backbone_damping(data, path),
+    "kt_definitions": lambda data, path: _stiffness_definitions().figure(data, path),
 }
 
 
@@ -318,6 +319,11 @@ def _backbones():
     # imported when drawn: report.backbones imports this module's helpers
     from . import backbones
     return backbones
+
+
+def _stiffness_definitions():
+    from . import stiffness_definitions
+    return stiffness_definitions
 
 
 def draw_figures(data: ReportData, folder: Path) -> list[Path]:

@@ -5,7 +5,7 @@ import numpy as np
 
 from ..model.interface_motion import RIGID_NAMES
 from ..study.artifacts import rq_label
-from . import backbones, like_for_like
+from . import backbones, like_for_like, stiffness_definitions
 from .data import PAPER, ReportData
 
 
@@ -193,7 +193,8 @@ def report_markdown(data: ReportData, summary: dict) -> str:
     head = _header(data, summary)
     L = (head[:2] + _warnings(summary) + head[2:] + _levels(data, summary) + _frf_table(data, summary)
          + _damping(data, summary) + _contact(data, summary) + _contact_area(data, summary)
-         + _seeds(data, summary) + _hardness(data, summary) + _state_figures()
+         + _seeds(data, summary) + _hardness(data, summary)
+         + stiffness_definitions.markdown(data, summary) + _state_figures()
          + _joint_state(summary) + _interface_motion(summary)
          + _v3(summary) + backbones.markdown(data, summary)
          + like_for_like.markdown(data, summary) + _cost(summary) + _speed(data.speed))

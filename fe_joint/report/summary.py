@@ -13,6 +13,7 @@ from ..study.artifacts import rq_label, v3_job_name
 from ..study.frf import CurveResult
 from . import like_for_like
 from .backbones import backbones_section
+from .stiffness_definitions import section as stiffness_definitions_section
 from .data import STAGES_READ, ReportData
 from .stiffness import configuration_joints, k_eq_table, rq_joints
 
@@ -124,6 +125,7 @@ def build_summary(data: ReportData) -> dict:
         summary["backbones"] = backbones_section(data)
     summary["like_for_like"] = like_for_like.section(data)
     summary["warnings"] += like_for_like.warnings(summary)
+    summary["stiffness_definitions"] = stiffness_definitions_section(data)
     if data.speed:
         summary["speed_vs_error"] = data.speed
     return summary
