@@ -24,7 +24,7 @@ import numpy as np
 from .errors import ConvergenceError, finite_array, positive_scalar
 from .grid import Grid
 from .halfspace import ElasticHalfSpace
-from .normal import NormalSolution, pk_normal_batch, solve_normal
+from .normal import NormalSolution, capped_load_control, pk_normal_batch, solve_normal
 from .tangential import pk_tangential_compacting, solve_tangential
 
 _AX = (-2, -1)
@@ -307,87 +307,11 @@ def _patch_normal(z, cell, young, poisson, W, periodic, threads, tol, hardness=N
         H = positive_scalar("hardness", hardness)
         if np.any(W >= H * hs.grid.area):
             raise ValueError(f"loads: must be below hardness × patch area = {H * hs.grid.area:.6g} N")
-        return hs, _capped_load_control(hs, h, W, H, tol)
+        p, _ = capped_load_control(hs._apply_normal, h, np.ones(h.shape, bool), hs.grid.cell_area,
+                                   W, H, tol)
+        return hs, p
     res = pk_normal_batch(hs._apply_normal, h, np.ones(z.shape, bool), hs.grid.cell_area, load=W, tol=tol)
     return hs, res["pressure"]
-
-
-def _capped_load_control(hs: ElasticHalfSpace, h: np.ndarray, W: np.ndarray, H: float, tol: float,
-                         max_steps: int = 100) -> np.ndarray:
-    """Pressures (B, n, m) of patches pressed with loads W (B,) and the pressure capped at H.
-
-    Load-controlled Polonsky–Keer with a cap stagnated on small patches whose few asperities all
-    reach H (no cell left below the cap to carry the rest of the load), while approach control
-    converges in a few iterations. So the approach δ of each patch is found by a safeguarded
-    secant (Illinois) on the monotone load N(δ) of approach-controlled solves, from the bracket
-    [0, 2^k × the elastic approach] (capping lowers N(δ), so the elastic approach is below the
-    capped one), until |N − W| ≤ 1e-6·W (the contact set, all k_n needs, is settled long
-    before; an approach-controlled load is itself only accurate to about the solve tolerance) or
-    the bracket is narrower than 1e-9 δ.
-    """
-    ltol = max(tol, 1e-6)
-    B = h.shape[0]
-    allowed = np.ones(h.shape, bool)
-    ca = hs.grid.cell_area
-    Hs = np.full(B, H)
-    p = np.zeros_like(h)
-    live = W > 0
-    if not live.any():
-        return p
-
-    def load_at(d, idx, p0):
-        # cold starts: a warm start from a higher load keeps cells at the cap whose gap has
-        # opened (the solver never lowers a capped cell), and its error measure accepts that
-        r = pk_normal_batch(hs._apply_normal, h[idx], allowed[idx], ca, approach=d, tol=tol * 1e-2,
-                            hardness=Hs[idx])
-        return r["pressure"], r["pressure"].sum(axis=_AX) * ca
-
-    idx = np.nonzero(live)[0]
-    el = pk_normal_batch(hs._apply_normal, h[idx], allowed[idx], ca, load=W[idx], tol=tol)
-    lo, hi = np.zeros(len(idx)), np.maximum(el["approach"], 1e-12)
-    f_lo = -W[idx]
-    p_hi, n_hi = load_at(hi, idx, el["pressure"])
-    f_hi = n_hi - W[idx]
-    for _ in range(60):                      # widen until N(hi) ≥ W
-        short = f_hi < 0
-        if not short.any():
-            break
-        lo[short], f_lo[short] = hi[short], f_hi[short]
-        hi[short] *= 2
-        ps, ns = load_at(hi[short], idx[short], p_hi[short])
-        p_hi[short], f_hi[short] = ps, ns - W[idx][short]
-    p_best = p_hi.copy()
-    done = np.abs(f_hi) <= ltol * W[idx]
-    side = np.zeros(len(idx), int)
-    for _ in range(max_steps):
-        if done.all():
-            break
-        t = np.nonzero(~done)[0]
-        den = f_hi[t] - f_lo[t]
-        d = np.where(den > 0, (lo[t] * f_hi[t] - hi[t] * f_lo[t]) / np.where(den > 0, den, 1.0),
-                     0.5 * (lo[t] + hi[t]))
-        d = np.where((d <= lo[t]) | (d >= hi[t]), 0.5 * (lo[t] + hi[t]), d)
-        ps, ns = load_at(d, idx[t], p_best[t])
-        f = ns - W[idx][t]
-        p_best[t] = ps
-        # matched, or the bracket has closed (N(δ) of capped solves can jump by a cell entering
-        # at the cap; the contact set is then that of the bracket's end)
-        ok = (np.abs(f) <= ltol * W[idx][t]) | (hi[t] - lo[t] <= 1e-9 * hi[t])
-        done[t[ok]] = True
-        # Illinois: when the same end is kept twice, halve its function value
-        a, fa = t[(f < 0) & ~ok], f[(f < 0) & ~ok]
-        lo[a], f_lo[a] = d[(f < 0) & ~ok], fa
-        f_hi[a] *= np.where(side[a] == -1, 0.5, 1.0)
-        side[a] = -1
-        b, fb = t[(f >= 0) & ~ok], f[(f >= 0) & ~ok]
-        hi[b], f_hi[b] = d[(f >= 0) & ~ok], fb
-        f_lo[b] *= np.where(side[b] == 1, 0.5, 1.0)
-        side[b] = 1
-    else:
-        raise ConvergenceError(f"capped patch loads: {int((~done).sum())} of {len(idx)} not matched "
-                               f"to tol={tol:g}", float("nan"), max_steps)
-    p[idx] = p_best
-    return p
 
 
 def patch_normal_stiffness(patches, cell_size, young: float, poisson: float, loads, *,
