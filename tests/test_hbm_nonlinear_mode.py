@@ -1,4 +1,6 @@
 """Nonlinear modes (EPMC) and single-nonlinear-mode synthesis (hbm.nonlinear_mode, hbm.synthesis)."""
+import zlib
+
 import numpy as np
 import pytest
 import scipy.linalg as sla
@@ -331,3 +333,31 @@ def test_snms_peak_is_the_resonance_not_the_rigid_body_background():
                         options={"xatol": 1e-10})
     assert abs(sr.peak_omega / r.x - 1) <= 1e-3
     assert abs(sr.peak_amplitude / -r.fun - 1) <= 2e-2
+
+
+class FloorContacts(FrictionContacts):
+    """Contacts whose forces carry a deterministic relative "noise" of 3e-7 per point (a stand-in
+    for the floor the march's switches leave in a nonsmooth residual): a strict Newton (1e-9)
+    cannot get below it."""
+
+    def evaluate(self, u, *args, **kwargs):
+        F, nl, DF = super().evaluate(u, *args, **kwargs)
+        rng = np.random.default_rng(zlib.crc32(np.ascontiguousarray(u).tobytes()))
+        return F * (1 + 3e-7 * rng.standard_normal(F.shape)), nl, DF
+
+
+def test_backbone_accepts_a_newton_stalled_at_a_residual_floor():
+    """At a floor of the residual (3e-8 > tol = 1e-9) EPMC Newton has no descent left; below
+    STAGNATION_FLOOR x tol the point is accepted (before: every step failed after 8 halvings and
+    the backbone stopped just past the slip onset, as the resonator's v1 did). The points equal the clean backbone's to 1e-6."""
+    s = LinearStructure([[M1]], [[K1]], [[C1]])
+    dofs = np.array([[[0, -1, -1], [-1, -1, -1]]])
+    kw = dict(kt=KT, kn=1.0, mu=FS, n0=1.0)
+    ref = HarmonicBalance(s, FrictionContacts(dofs, **kw), harmonics=1, samples=256,
+                          tol=1e-9).nonlinear_mode(0, (0.05, 2.0), dof=0, n_points=10)
+    bb = HarmonicBalance(s, FloorContacts(dofs, **kw), harmonics=1, samples=256,
+                         tol=1e-9).nonlinear_mode(0, (0.05, 2.0), dof=0, n_points=10, partial=True)
+    assert bb.complete and bb.omega.size == ref.omega.size
+    assert np.max(bb.residual) > 1e-9                       # accepted above tol, at the floor
+    assert np.allclose(bb.omega, ref.omega, rtol=1e-6, atol=0)
+    assert np.allclose(bb.zeta, ref.zeta, rtol=1e-6, atol=0)
