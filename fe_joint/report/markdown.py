@@ -6,6 +6,10 @@ import numpy as np
 from ..model.interface_motion import RIGID_NAMES
 from ..study.artifacts import rq_label
 from . import backbones
+from .findings import findings_markdown
+from .paraview import paraview_markdown
+from .provenance import parameters_markdown, provenance_markdown
+from .table1 import table1_markdown
 from .data import PAPER, ReportData
 
 
@@ -191,11 +195,15 @@ def report_markdown(data: ReportData, summary: dict) -> str:
         Markdown text ending in a newline; figures are linked as ``figures/<name>.png``.
     """
     head = _header(data, summary)
-    L = (head[:2] + _warnings(summary) + head[2:] + _levels(data, summary) + _frf_table(data, summary)
+    L = (head[:2] + _warnings(summary) + findings_markdown(summary["findings"]) + head[2:]
+         + parameters_markdown(data) + table1_markdown(data)
+         + _levels(data, summary) + _frf_table(data, summary)
          + _damping(data, summary) + _contact(data, summary) + _contact_area(data, summary)
          + _seeds(data, summary) + _hardness(data, summary) + _state_figures()
+         + paraview_markdown(data)
          + _joint_state(summary) + _interface_motion(summary)
-         + _v3(summary) + backbones.markdown(data, summary) + _cost(summary) + _speed(data.speed))
+         + _v3(summary) + backbones.markdown(data, summary) + _cost(summary) + _speed(data.speed)
+         + [""] + provenance_markdown(data, summary["provenance"]))
     return "\n".join(L) + "\n"
 
 

@@ -13,6 +13,8 @@ from ..study.artifacts import rq_label, v3_job_name
 from ..study.frf import CurveResult
 from .backbones import backbones_section
 from .data import STAGES_READ, ReportData
+from .findings import findings, findings_summary
+from .provenance import provenance
 from .stiffness import configuration_joints, k_eq_table, rq_joints
 
 #: the mesh statistics copied from the mesh stage
@@ -123,6 +125,9 @@ def build_summary(data: ReportData) -> dict:
         summary["backbones"] = backbones_section(data)
     if data.speed:
         summary["speed_vs_error"] = data.speed
+    summary["provenance"] = provenance(data)
+    # last: the findings read the numbers above
+    summary["findings"] = findings_summary(findings(data, summary))
     return summary
 
 
