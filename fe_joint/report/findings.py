@@ -123,7 +123,8 @@ def fig8(data: ReportData, s: dict) -> Finding:
     on = (kn > 0) & (rm.preload_normal_force > 0)
     mean, mx, k_ref = s["kn_smooth_mean"], s["kn_smooth_max"], data.case.contact.k_ref
     cv = float(np.std(kn[on]) / np.mean(kn[on])) if on.any() else float("nan")
-    rho = float(spearmanr(kn[on], rm.preload_pressure[on])[0]) if on.sum() > 2 else float("nan")
+    varies = on.sum() > 2 and np.ptp(kn[on]) > 0 and np.ptp(rm.preload_pressure[on]) > 0
+    rho = float(spearmanr(kn[on], rm.preload_pressure[on])[0]) if varies else float("nan")
     ok = abs(_rel(mean, k_ref)) <= CLOSE and rho >= 0.5
     return Finding(
         "Fig. 8", "smooth multiscale k_n",
@@ -486,7 +487,8 @@ def fig17(data: ReportData, s: dict) -> Finding:
         cr = data.curve(c, i)
         act = cr.status < 4
         slip = int(np.sum((cr.status == 1) | (cr.status == 2)))
-        rho = abs(float(spearmanr(r[act], cr.status[act])[0])) if act.sum() > 2 else float("nan")
+        varies = act.sum() > 2 and np.ptp(cr.status[act]) > 0
+        rho = abs(float(spearmanr(r[act], cr.status[act])[0])) if varies else 0.0
         e = cr.energy / data.area
         hot = float(e.max() / e[e > 0].mean()) if np.any(e > 0) else float("nan")
         out[c] = (slip, rho, hot)

@@ -200,7 +200,7 @@ def report_markdown(data: ReportData, summary: dict) -> str:
          + _levels(data, summary) + _frf_table(data, summary)
          + _damping(data, summary) + _contact(data, summary) + _contact_area(data, summary)
          + _seeds(data, summary) + _hardness(data, summary) + _state_figures()
-         + paraview_markdown(data)
+         + _paper_figures(data) + paraview_markdown(data)
          + _joint_state(summary) + _interface_motion(summary)
          + _v3(summary) + backbones.markdown(data, summary) + _cost(summary) + _speed(data.speed)
          + [""] + provenance_markdown(data, summary["provenance"]))
@@ -378,3 +378,29 @@ def _hardness(data: ReportData, s: dict) -> list[str]:
                  f"{a['kn_eq']:.3g} → {b['kn_eq']:.3g} | {a['kt_eq']:.3g} → {b['kt_eq']:.3g} | "
                  f"{a['stuck_hz']:.2f} → {b['stuck_hz']:.2f} | {a['loaded_elements']} → {b['loaded_elements']} |")
     return L + [""]
+
+
+#: the counterparts of the paper's figures (paper_figures.py): file stem → caption
+PAPER_FIGURE_CAPTIONS = {
+    "fig12_smooth_maps": "Paper Fig. 12: baseline (top) and smooth-ms (bottom): FE pressure, k_n, "
+                         "status and dissipated energy at resonance (common scales per column).",
+    "fig13_heights": "Paper Fig. 13: heights of the comparison surface and its contact morphology "
+                     "under the bolt load.",
+    "fig17_all_configurations": "Paper Fig. 17: every configuration at the lowest level where the "
+                                "joints slip (common energy scale).",
+    "fig21_levels": "Paper Fig. 21 at every level: forced FRFs where swept (solid, unstable dotted), "
+                    "elsewhere synthesized from the joint's backbone (dashed).",
+    "fig22_loops_rq": "Paper Fig. 22: whole-joint loops at resonance against Rq (area = dissipated "
+                      "energy per cycle).",
+    "ratio_maps_v3_v2": "v3 / v2 per element (k_n, k_t) and v3's k_t/k_n over Mindlin's ratio "
+                        "(paper Fig. 14 b vs c).",
+}
+
+
+def _paper_figures(data: ReportData) -> list[str]:
+    """Links to the paper-figure counterparts that were drawn, with their captions."""
+    L = ["## Counterparts of the paper's figures", ""]
+    for name, cap in PAPER_FIGURE_CAPTIONS.items():
+        if (data.out / "figures" / f"{name}.png").exists():
+            L += [cap, "", f"![{name}](figures/{name}.png)", ""]
+    return L if len(L) > 2 else []
