@@ -16,12 +16,10 @@ import xml.etree.ElementTree as ET
 import h5py
 import numpy as np
 import pytest
-import scipy.linalg as sla
 
 from fe_joint.case import case_from_dict
 from fe_joint.report import findings as fd
 from fe_joint.report.data import load_report_data
-from fe_joint.report.summary import build_summary
 from test_report import AREA, CASE, N0_FE, NE, make_run
 
 PNG = b"\x89PNG\r\n\x1a\n"

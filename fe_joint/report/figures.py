@@ -55,9 +55,10 @@ def _map(ax, xy: np.ndarray, values: np.ndarray, title: str, cmap: str = "viridi
 
 def _grid_image(ax, field: np.ndarray, extent: tuple, title: str, label: str,
                 cmap: str = "viridis", log: bool = False, vmin: float | None = None,
-                vmax: float | None = None) -> None:
+                vmax: float | None = None, ticks: dict | None = None) -> None:
     """Image of a BEM grid field over the overlap (extent in mm); ``log``: log scale, ≤ 0 masked;
-    vmin, vmax: a colour range shared with other panels (None: this field's)."""
+    vmin, vmax: a colour range shared with other panels (None: this field's); ticks: colour-bar
+    value → label (a categorical field)."""
     import matplotlib.colors as mc
     data = np.ma.masked_less_equal(field, 0) if log else field
     norm = mc.LogNorm(vmin=vmin, vmax=vmax) if log and np.any(field > 0) else None
@@ -66,7 +67,14 @@ def _grid_image(ax, field: np.ndarray, extent: tuple, title: str, label: str,
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
-    ax.figure.colorbar(im, ax=ax, shrink=0.8).set_label(label)
+    cb = ax.figure.colorbar(im, ax=ax, shrink=0.8)
+    cb.set_label(label)
+    if ticks:
+        cb.set_ticks(list(ticks), labels=list(ticks.values()))
+
+
+#: colour-bar labels of a contact map (1 = in contact)
+CONTACT_TICKS = {0.0: "no", 1.0: "yes"}
 
 
 def _legend_styles(ax, extra: list[tuple[str, str]], fontsize: int = 8) -> None:
@@ -169,9 +177,9 @@ def pressure_morphology(data: ReportData, path: Path) -> Path:
     lo = min((float(p.min()) for p in pos if p.size), default=None)
     hi = max((float(p.max()) for p in pos if p.size), default=None)
     mask = data.extra["mask"].astype(bool)
-    _grid_image(axes[1, 0], np.where(mask, 1.0, np.nan), extent, "usable overlap (hole masked)", "",
-                cmap="Greys", vmin=0, vmax=1)
     binary = mc.ListedColormap(["white", "black"])
+    _grid_image(axes[1, 0], np.where(mask, 1.0, 0.0), extent, "usable overlap (white: the bolt hole)",
+                "usable", cmap=binary, vmin=0, vmax=1, ticks=CONTACT_TICKS)
     for k, rq in enumerate(rqs):
         sc = data.surfaces[rq]
         _grid_image(axes[0, k + 1], sc.pressure, extent,
@@ -179,7 +187,8 @@ def pressure_morphology(data: ReportData, path: Path) -> Path:
                     cmap="jet", log=True, vmin=lo, vmax=hi)
         _grid_image(axes[1, k + 1], (sc.pressure > 0).astype(float), extent,
                     f"Rq = {rq_label(rq)} µm: contact morphology, {100 * sc.contact_fraction:.1f} % "
-                    "of the usable overlap", "in contact", cmap=binary, vmin=0, vmax=1)
+                    "of the usable overlap", "in contact", cmap=binary, vmin=0, vmax=1,
+                    ticks=CONTACT_TICKS)
     return _save(fig, path)
 
 

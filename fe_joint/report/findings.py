@@ -18,7 +18,7 @@ from scipy.stats import spearmanr
 from ..study.artifacts import rq_label
 from .data import PAPER, ReportData
 from .loops import joint_equivalent_loop
-from .stiffness import configuration_joints, rq_joints
+from .stiffness import rq_joints
 
 AGREE, DISAGREE, NOT_COMPARABLE = "agree", "disagree", "not comparable"
 #: "similar" peaks: relative frequency and amplitude differences below these

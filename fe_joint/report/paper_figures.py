@@ -14,7 +14,7 @@ import numpy as np
 
 from ..study.artifacts import rq_label
 from .data import ReportData
-from .figures import (COLORS, STATUS_LABEL, _extent, _grid_image, _legend_styles, _map, _plot_curve,
+from .figures import (CONTACT_TICKS, STATUS_LABEL, _extent, _grid_image, _legend_styles, _map, _plot_curve,
                       _plt, _save, status_energy_panels)
 from .findings import _zone_level
 from .loops import joint_equivalent_loop
@@ -67,7 +67,7 @@ def fig13_heights(data: ReportData, path: Path) -> Path:
     _grid_image(axes[1], (sc.pressure > 0).astype(float), extent,
                 f"contact morphology at {data.case.preload.bolt_force / 1e3:g} kN: "
                 f"{100 * sc.contact_fraction:.2f} % of the usable overlap", "in contact",
-                cmap=mc.ListedColormap(["white", "black"]), vmin=0, vmax=1)
+                cmap=mc.ListedColormap(["white", "black"]), vmin=0, vmax=1, ticks=CONTACT_TICKS)
     return _save(fig, path)
 
 
