@@ -39,8 +39,9 @@ def _save(fig, path: Path) -> Path:
 
 def _map(ax, xy: np.ndarray, values: np.ndarray, title: str, cmap: str = "viridis",
          label: str = "", vmin: float | None = None, vmax: float | None = None,
-         hole: float | None = None) -> None:
-    """Scatter map of per-element values at their (x, y) in mm, with the bolt hole (diameter, mm)."""
+         hole: float | None = None, ticks: dict | None = None) -> None:
+    """Scatter map of per-element values at their (x, y) in mm, with the bolt hole (diameter, mm);
+    ticks: colour-bar value → label (a categorical field)."""
     sc = ax.scatter(xy[:, 0], xy[:, 1], c=values, s=18, cmap=cmap, vmin=vmin, vmax=vmax)
     if hole:
         from matplotlib.patches import Circle
@@ -51,6 +52,8 @@ def _map(ax, xy: np.ndarray, values: np.ndarray, title: str, cmap: str = "viridi
     ax.set_ylabel("y [mm]")
     cb = ax.figure.colorbar(sc, ax=ax, shrink=0.8)
     cb.set_label(label)
+    if ticks:
+        cb.set_ticks(list(ticks), labels=list(ticks.values()))
 
 
 def _grid_image(ax, field: np.ndarray, extent: tuple, title: str, label: str,
@@ -217,7 +220,9 @@ def stiffness_maps(data: ReportData, path: Path) -> Path:
     return _save(fig, path)
 
 
-STATUS_LABEL = "0 stuck 1 stick-slip 2 slip 3 part-open 4 open"
+STATUS_LABEL = ""
+#: colour-bar labels of a status map
+STATUS_TICKS = dict(enumerate(STATUS_NAMES))
 
 
 def status_energy_panels(data: ReportData, level: int, configs: list[str], path: Path) -> Path | None:
@@ -240,7 +245,7 @@ def status_energy_panels(data: ReportData, level: int, configs: list[str], path:
         n = np.bincount(np.asarray(cr.status, int), minlength=5)
         _map(axes[0, k], data.xy, cr.status, f"{cfg}: status at resonance, {data.levels[level]:.3g} N\n"
              f"stuck {n[0]}, stick–slip {n[1]}, slip {n[2]}, part-open {n[3]}, open {n[4]}",
-             cmap=cmap, vmin=-0.5, vmax=4.5, label=STATUS_LABEL, hole=hole)
+             cmap=cmap, vmin=-0.5, vmax=4.5, label=STATUS_LABEL, hole=hole, ticks=STATUS_TICKS)
         _map(axes[1, k], data.xy, cr.energy / data.area,
              f"{cfg}: dissipated energy / area, W = {cr.dissipated:.3g} N·mm", cmap="magma",
              label="N·mm/mm² per cycle (common scale)", hole=hole, vmin=0.0, vmax=emax)

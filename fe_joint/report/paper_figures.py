@@ -14,8 +14,8 @@ import numpy as np
 
 from ..study.artifacts import rq_label
 from .data import ReportData
-from .figures import (CONTACT_TICKS, STATUS_LABEL, _extent, _grid_image, _legend_styles, _map, _plot_curve,
-                      _plt, _save, status_energy_panels)
+from .figures import (CONTACT_TICKS, STATUS_LABEL, STATUS_TICKS, _extent, _grid_image,
+                      _legend_styles, _map, _plot_curve, _plt, _save, status_energy_panels)
 from .findings import _zone_level
 from .loops import joint_equivalent_loop
 from .stiffness import configuration_joints
@@ -47,7 +47,7 @@ def fig12_smooth_maps(data: ReportData, path: Path) -> Path | None:
         _map(axes[r, 1], data.xy, j.kn, f"{cfg}: k_n (common scale)", label="N/mm³", hole=hole,
              vmin=0.0, vmax=kmax)
         _map(axes[r, 2], data.xy, cr.status, f"{cfg}: status at resonance, {data.levels[i]:.3g} N",
-             cmap=cmap, vmin=-0.5, vmax=4.5, label=STATUS_LABEL, hole=hole)
+             cmap=cmap, vmin=-0.5, vmax=4.5, label=STATUS_LABEL, hole=hole, ticks=STATUS_TICKS)
         _map(axes[r, 3], data.xy, cr.energy / data.area, f"{cfg}: energy / area, W = {cr.dissipated:.3g} N·mm",
              cmap="magma", label="N·mm/mm² per cycle (common scale)", hole=hole, vmin=0.0, vmax=emax)
     return _save(fig, path)
