@@ -90,6 +90,13 @@ def _legend_styles(ax, extra: list[tuple[str, str]], fontsize: int = 8) -> None:
     ax.legend(handles, labels, fontsize=fontsize)
 
 
+def _zoom(ax, peaks_hz: list[float]) -> None:
+    """Frequency axis from 2.5 % below the lowest peak to 1.5 % above the highest (the sweeps'
+    bands are wider than the resonances they hold)."""
+    if peaks_hz:
+        ax.set_xlim(0.975 * min(peaks_hz), 1.015 * max(peaks_hz))
+
+
 def _plot_curve(ax, cr: CurveResult, color, label: str) -> None:
     """A forced FRF, stable part solid, unstable part (Hill) dotted."""
     ax.plot(cr.omega_hz, np.where(cr.stable, cr.amplitude, np.nan), color=color, label=label)
@@ -125,6 +132,7 @@ def frf_configurations(data: ReportData, path: Path) -> Path:
                         "-.", color=COLORS[cfg], lw=0.8, alpha=0.7)
         if top > 0:
             ax.set_ylim(0, 1.4 * top)
+        _zoom(ax, [c.peak_hz for c in (data.curve(g, i) for g in data.configs) if c is not None])
         ax.set_title(f"excitation {lv:.3g} N ({lv / data.macroslip:.2f} × macroslip est.)", fontsize=9)
         ax.set_xlabel("frequency [Hz]")
         ax.set_ylabel("mass A amplitude, 1st harmonic [mm]")
@@ -153,6 +161,7 @@ def frf_roughness(data: ReportData, path: Path) -> Path:
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("mass A amplitude [mm]")
     ax.set_title(f"roughness sweep at {data.levels[data.mid]:.3g} N", fontsize=9)
+    _zoom(ax, [cr.peak_hz for _, cr in rq_curves] + ([base.peak_hz] if base is not None else []))
     _legend_styles(ax, [(":", "unstable (Hill)")])
     return _save(fig, path)
 

@@ -386,8 +386,8 @@ PAPER_FIGURE_CAPTIONS = {
                          "status and dissipated energy at resonance (common scales per column).",
     "fig13_heights": "Paper Fig. 13: heights of the comparison surface and its contact morphology "
                      "under the bolt load.",
-    "fig17_all_configurations": "Paper Fig. 17: every configuration at the lowest level where the "
-                                "joints slip (common energy scale).",
+    "fig17_all_configurations": "Paper Fig. 17: every configuration at the lowest level (common "
+                                "energy scale; the top level is in the figure above).",
     "fig21_levels": "Paper Fig. 21 at every level: forced FRFs where swept (solid, unstable dotted), "
                     "elsewhere synthesized from the joint's backbone (dashed).",
     "fig22_loops_rq": "Paper Fig. 22: whole-joint loops at resonance against Rq (area = dissipated "

@@ -15,7 +15,7 @@ import numpy as np
 from ..study.artifacts import rq_label
 from .data import ReportData
 from .figures import (CONTACT_TICKS, STATUS_LABEL, STATUS_TICKS, _extent, _grid_image,
-                      _legend_styles, _map, _plot_curve, _plt, _save, status_energy_panels)
+                      _legend_styles, _map, _plot_curve, _plt, _save, _zoom, status_energy_panels)
 from .findings import _zone_level
 from .loops import joint_equivalent_loop
 from .stiffness import configuration_joints
@@ -72,11 +72,9 @@ def fig13_heights(data: ReportData, path: Path) -> Path:
 
 
 def fig17_all_configurations(data: ReportData, path: Path) -> Path | None:
-    """Every configuration's status and energy at the lowest level where the baseline and the
-    multiscale joint slip (the Findings' Fig. 17 level; paper Fig. 17 at 500 N)."""
-    ms = [c for c in ("v3", "v2", "v1") if c in data.configs]
-    i = _zone_level(data, ("baseline",) + tuple(ms[:1]))
-    return None if i is None else status_energy_panels(data, i, data.configs, path)
+    """Every configuration's status and energy at the lowest level (paper Fig. 17 at its lowest,
+    500 N; common energy scale). The top level's maps are ``status_energy.png``."""
+    return status_energy_panels(data, 0, data.configs, path)
 
 
 def _snms_curve(br, level: float) -> tuple[np.ndarray, np.ndarray] | None:
@@ -107,18 +105,22 @@ def fig21_levels(data: ReportData, path: Path) -> Path:
     bbs = {k.rq_um: br for k, br in data.backbones.items() if k.config == "v3"}
     fig, axes = plt.subplots(1, len(data.levels), figsize=(5.2 * len(data.levels), 4.3), squeeze=False)
     for i, lv in enumerate(data.levels):
-        ax = axes[0, i]
+        ax, peaks = axes[0, i], []
         base = data.curve("baseline", i)
         if base is not None:
             _plot_curve(ax, base, "k", "baseline")
+            peaks.append(base.peak_hz)
         for j, rq in enumerate(rqs):
             color = cmap(0.85 * j / max(len(rqs) - 1, 1))
             cr = next((c for k, c in data.curves.items()
                        if k.config == "v3" and k.level_index == i and k.rq_um == rq), None)
             if cr is not None:
                 _plot_curve(ax, cr, color, f"v3, Rq {rq_label(rq)} µm")
+                peaks.append(cr.peak_hz)
             elif rq in bbs and (syn := _snms_curve(bbs[rq], lv)) is not None:
                 ax.plot(*syn, "--", color=color, label=f"v3, Rq {rq_label(rq)} µm (SNMS)")
+                peaks.append(float(syn[0][np.argmax(syn[1])]))
+        _zoom(ax, peaks)
         ax.set_title(f"L{i}: {lv:.3g} N", fontsize=9)
         ax.set_xlabel("frequency [Hz]")
         ax.set_ylabel("mass A amplitude, 1st harmonic [mm]")
@@ -153,27 +155,40 @@ def fig22_loops_rq(data: ReportData, path: Path) -> Path | None:
 
 def ratio_maps(data: ReportData, path: Path) -> Path | None:
     """v3 / v2 per element on the comparison surface: k_n, k_t, and v3's k_t/k_n over Mindlin's
-    ratio (1 = Mindlin); diverging colours centred on 1. None without v3."""
+    ratio (1 = Mindlin). One logarithmic colour scale centred on 1 for the three panels, its range
+    the 98th percentile of the deviations (the few beyond it saturate). None without v3."""
+    import matplotlib.colors as mc
+    from matplotlib.patches import Circle
     k3 = data.v3_arrays.get(data.v_rq)
     if k3 is None:
         return None
     sv, nu = data.surfaces[data.v_rq], data.case.material.poisson
     mindlin = 2 * (1 - nu) / (2 - nu)
-    on = (sv.kn > 0) & (k3["kn"] > 0)
-
-    def ratio(a, b):
-        return np.where(on, a / np.where(b > 0, b, 1.0), np.nan)
-    panels = [("k_n v3 / v2", ratio(k3["kn"], sv.kn)), ("k_t v3 / v2 (Mindlin)", ratio(k3["kt"], sv.kt_mindlin)),
-              ("v3 (k_t / k_n) / Mindlin ratio", ratio(k3["kt"], k3["kn"]) / mindlin)]
-    dev = max(float(np.nanmax(np.abs(v - 1))) for _, v in panels if np.any(np.isfinite(v)))
-    dev = max(dev, 1e-3)
-    fig, axes = _plt().subplots(1, 3, figsize=(14, 4))
+    on = (sv.kn > 0) & (k3["kn"] > 0) & (sv.kt_mindlin > 0) & (k3["kt"] > 0)
+    panels = [("k_n: v3 / v2", k3["kn"][on] / sv.kn[on]),
+              ("k_t: v3 (loop) / v2 (Mindlin)", k3["kt"][on] / sv.kt_mindlin[on]),
+              ("v3 (k_t / k_n) / Mindlin's ratio", k3["kt"][on] / k3["kn"][on] / mindlin)]
+    dev = np.abs(np.log(np.concatenate([v for _, v in panels]))) if on.any() else np.zeros(1)
+    r = float(np.exp(max(np.percentile(dev, 98), np.log(1.02))))
+    norm = mc.LogNorm(vmin=1 / r, vmax=r)
+    fig, axes = _plt().subplots(1, 3, figsize=(15, 4.4))
     for ax, (title, v) in zip(axes, panels):
-        sc = ax.scatter(data.xy[~on, 0], data.xy[~on, 1], s=10, c="lightgrey", label="not in contact")
-        _map(ax, data.xy[on], v[on], f"{title}, Rq {rq_label(data.v_rq)} µm", cmap="RdBu_r",
-             hole=data.case.geometry.hole_diameter, label="ratio (common scale)",
-             vmin=1 - dev, vmax=1 + dev)
-        ax.legend(handles=[sc], fontsize=7, loc="upper right")
+        ax.scatter(data.xy[~on, 0], data.xy[~on, 1], s=8, marker="x", c="0.6", lw=0.7,
+                   label=f"not in contact ({int(np.sum(~on))})")
+        sc = ax.scatter(data.xy[on, 0], data.xy[on, 1], c=v, s=26, cmap="RdBu_r", norm=norm,
+                        edgecolors="0.3", linewidths=0.4)
+        ax.add_patch(Circle((0, 0), data.case.geometry.hole_diameter / 2, fill=False, lw=0.8, color="k"))
+        ax.set_aspect("equal")
+        ax.set_title(f"{title}, Rq {rq_label(data.v_rq)} µm\nmedian {np.median(v):.3f}, "
+                     f"range {v.min():.3f} … {v.max():.3f}", fontsize=8)
+        ax.set_xlabel("x [mm]")
+        ax.set_ylabel("y [mm]")
+        ax.legend(fontsize=7, loc="upper right")
+        cb = ax.figure.colorbar(sc, ax=ax, shrink=0.8, extend="both")
+        cb.set_label("ratio (common log scale)")
+        ticks = [1 / r, r ** -0.5, 1.0, r ** 0.5, r]
+        cb.set_ticks(ticks, labels=[f"{t:.3g}" for t in ticks])
+        cb.ax.minorticks_off()
     return _save(fig, path)
 
 
