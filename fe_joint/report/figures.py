@@ -42,7 +42,9 @@ def _map(ax, xy: np.ndarray, values: np.ndarray, title: str, cmap: str = "viridi
          hole: float | None = None, ticks: dict | None = None) -> None:
     """Scatter map of per-element values at their (x, y) in mm, with the bolt hole (diameter, mm);
     ticks: colour-bar value → label (a categorical field)."""
-    sc = ax.scatter(xy[:, 0], xy[:, 1], c=values, s=18, cmap=cmap, vmin=vmin, vmax=vmax)
+    # thin grey edges: light colours (a zero on a white-based map) stay visible
+    sc = ax.scatter(xy[:, 0], xy[:, 1], c=values, s=20, cmap=cmap, vmin=vmin, vmax=vmax,
+                    edgecolors="0.45", linewidths=0.3)
     if hole:
         from matplotlib.patches import Circle
         ax.add_patch(Circle((0, 0), hole / 2, fill=False, lw=0.8, color="k"))
@@ -256,7 +258,7 @@ def status_energy_panels(data: ReportData, level: int, configs: list[str], path:
              f"stuck {n[0]}, stick–slip {n[1]}, slip {n[2]}, part-open {n[3]}, open {n[4]}",
              cmap=cmap, vmin=-0.5, vmax=4.5, label=STATUS_LABEL, hole=hole, ticks=STATUS_TICKS)
         _map(axes[1, k], data.xy, cr.energy / data.area,
-             f"{cfg}: dissipated energy / area, W = {cr.dissipated:.3g} N·mm", cmap="magma",
+             f"{cfg}: dissipated energy / area, W = {cr.dissipated:.3g} N·mm", cmap="YlOrRd",
              label="N·mm/mm² per cycle (common scale)", hole=hole, vmin=0.0, vmax=emax)
     return _save(fig, path)
 

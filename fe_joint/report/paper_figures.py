@@ -49,7 +49,7 @@ def fig12_smooth_maps(data: ReportData, path: Path) -> Path | None:
         _map(axes[r, 2], data.xy, cr.status, f"{cfg}: status at resonance, {data.levels[i]:.3g} N",
              cmap=cmap, vmin=-0.5, vmax=4.5, label=STATUS_LABEL, hole=hole, ticks=STATUS_TICKS)
         _map(axes[r, 3], data.xy, cr.energy / data.area, f"{cfg}: energy / area, W = {cr.dissipated:.3g} N·mm",
-             cmap="magma", label="N·mm/mm² per cycle (common scale)", hole=hole, vmin=0.0, vmax=emax)
+             cmap="YlOrRd", label="N·mm/mm² per cycle (common scale)", hole=hole, vmin=0.0, vmax=emax)
     return _save(fig, path)
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..pipeline.environment import git_describe
 from ..study.artifacts import rq_label
-from .data import ReportData
+from .data import STAGES_READ, ReportData
 
 #: the version rows of the provenance table, in order (package import names)
 VERSION_PACKAGES = ("numpy", "scipy", "h5py", "matplotlib", "mpi4py", "pyfftw", "gmsh", "dolfinx",
@@ -108,7 +108,7 @@ def provenance(data: ReportData) -> dict:
         "finished", "report_python", "case_file"}.
     """
     env = data.environments
-    commits = {s: e.get("commit", NOT_RECORDED) for s, e in env.items()}
+    commits = {s: (env.get(s) or {}).get("commit", NOT_RECORDED) for s in STAGES_READ}
     recorded = [c for c in commits.values() if c != NOT_RECORDED]
     versions: dict[str, str] = {}
     for s in ("mesh", "fe", "contact", "dynamics"):   # later stages win: the numbers are theirs
@@ -119,6 +119,9 @@ def provenance(data: ReportData) -> dict:
     return {"commit": recorded[-1] if recorded else git_describe(),
             "commit_source": "run" if recorded else "report",
             "stage_commits": commits,
+            "stages": {s: {"commit": commits[s],
+                           "ranks": (env.get(s) or {}).get("ranks", NOT_RECORDED),
+                           "time": (env.get(s) or {}).get("time", NOT_RECORDED)} for s in STAGES_READ},
             "python": ", ".join(pythons) or NOT_RECORDED,
             "versions": {p: versions.get(p, NOT_RECORDED) for p in VERSION_PACKAGES},
             "ranks": ", ".join(str(r) for r in ranks) or NOT_RECORDED,
@@ -128,12 +131,11 @@ def provenance(data: ReportData) -> dict:
 
 
 def provenance_markdown(data: ReportData, prov: dict) -> list[str]:
-    """The provenance table as Markdown lines (``prov`` from :func:`provenance`)."""
+    """The provenance tables as Markdown lines (``prov`` from :func:`provenance`)."""
     commit = prov["commit"] + ("" if prov["commit_source"] == "run" else
                                " (the report's code: the run recorded none)")
-    distinct = sorted(set(prov["stage_commits"].values()))
-    if len(distinct) > 1:
-        commit += " — stages differ: " + ", ".join(f"{s} {c}" for s, c in prov["stage_commits"].items())
+    if len(set(prov["stage_commits"].values())) > 1:
+        commit += " (the stages differ: see below)"
     L = ["## Provenance", "", "| | |", "|---|---|",
          f"| commit (`git describe`) | {commit} |",
          f"| case file | [`case.toml`](case.toml) (the effective case of the run, every key) |",
@@ -141,5 +143,7 @@ def provenance_markdown(data: ReportData, prov: dict) -> list[str]:
          f"| stages ran | {prov['started']} … {prov['finished']} (stage_log.jsonl, local time) |",
          f"| python (run) | {prov['python']} |"]
     L += [f"| {p} | {v} |" for p, v in prov["versions"].items()]
-    L += [f"| report written with | python {prov['report_python']}, numpy {prov['report_numpy']} |"]
-    return L + [""]
+    L += [f"| report written with | python {prov['report_python']}, numpy {prov['report_numpy']} |", "",
+          "| stage | commit | ranks | finished (UTC) |", "|---|---|---|---|"]
+    L += [f"| {s} | {v['commit']} | {v['ranks']} | {v['time']} |" for s, v in prov["stages"].items()]
+    return L + ["", "(\"not recorded\": the stage ran before stages recorded their environment.)", ""]
