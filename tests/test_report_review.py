@@ -279,3 +279,26 @@ def test_new_figures_drawn_and_linked(run):
     # no smooth-ms in the fixture: no Fig. 12 counterpart, and no link to a missing file
     assert not (out / "figures" / "fig12_smooth_maps.png").exists()
     assert "fig12_smooth_maps" not in md
+
+
+def test_zone_verdict_follows_the_status_map(run):
+    """Fig. 12: stuck inside, slipping further out, open at the edge → agree, with the mean
+    radii of the groups computed here; the reverse map → disagree."""
+    from test_report import XY
+    _, _, data, s = run
+    r = np.hypot(XY[:, 0], XY[:, 1])
+    order = np.argsort(r)
+    ordered = np.empty(NE, int)
+    ordered[order] = [0, 0, 1, 1, 1, 3]                # radii ascending: stuck, slipping, opening
+    curves = dict(data.curves)
+    for k in [k for k in curves if k.config == "baseline"]:
+        curves[k] = dataclasses.replace(curves[k], status=ordered)
+    f = fd.fig12(dataclasses.replace(data, curves=curves), s)
+    assert f.verdict == fd.AGREE
+    assert f"stuck {np.mean(r[order[:2]]):.2f} mm, slipping {np.mean(r[order[2:5]]):.2f} mm, " \
+           f"opening {r[order[5]]:.2f} mm" in f.ours
+    rev = np.empty(NE, int)
+    rev[order] = [3, 1, 1, 1, 0, 0]
+    for k in [k for k in curves if k.config == "baseline"]:
+        curves[k] = dataclasses.replace(curves[k], status=rev)
+    assert fd.fig12(dataclasses.replace(data, curves=curves), s).verdict == fd.DISAGREE
