@@ -77,9 +77,11 @@ def fig17_all_configurations(data: ReportData, path: Path) -> Path | None:
     return status_energy_panels(data, 0, data.configs, path)
 
 
-def _snms_curve(br, level: float) -> tuple[np.ndarray, np.ndarray] | None:
+def _snms_curve(br, level: float, f_peak: float) -> tuple[np.ndarray, np.ndarray] | None:
     """The forced response synthesized from a backbone at ``level`` N: (Hz, mm) along the curve
-    (lower branch up to the peak, then the upper branch back), None if the synthesis fails."""
+    (lower branch up to the peak, then the upper branch back) within −5 % … +3 % of its peak
+    frequency ``f_peak`` (Hz; far below it the free–free structure's rigid-body background
+    dominates), None if the synthesis fails."""
     from hbm import synthesize
     try:
         sr = synthesize(br.backbone(), np.array([level, 0.0]))
@@ -88,7 +90,7 @@ def _snms_curve(br, level: float) -> tuple[np.ndarray, np.ndarray] | None:
     lo, hi = sr.omega_low / (2 * np.pi), sr.omega_high / (2 * np.pi)
     f = np.concatenate([lo, hi[::-1]])
     a = np.concatenate([sr.amplitude_low, sr.amplitude_high[::-1]])
-    ok = np.isfinite(f) & np.isfinite(a)
+    ok = np.isfinite(f) & np.isfinite(a) & (f > 0.95 * f_peak) & (f < 1.03 * f_peak)
     return (f[ok], a[ok]) if ok.sum() > 2 else None
 
 
@@ -117,9 +119,10 @@ def fig21_levels(data: ReportData, path: Path) -> Path:
             if cr is not None:
                 _plot_curve(ax, cr, color, f"v3, Rq {rq_label(rq)} µm")
                 peaks.append(cr.peak_hz)
-            elif rq in bbs and (syn := _snms_curve(bbs[rq], lv)) is not None:
+            elif (rq in bbs and np.isfinite(bbs[rq].snms_hz[i])
+                  and (syn := _snms_curve(bbs[rq], lv, float(bbs[rq].snms_hz[i]))) is not None):
                 ax.plot(*syn, "--", color=color, label=f"v3, Rq {rq_label(rq)} µm (SNMS)")
-                peaks.append(float(syn[0][np.argmax(syn[1])]))
+                peaks.append(float(bbs[rq].snms_hz[i]))
         _zoom(ax, peaks)
         ax.set_title(f"L{i}: {lv:.3g} N", fontsize=9)
         ax.set_xlabel("frequency [Hz]")
