@@ -302,3 +302,14 @@ def test_zone_verdict_follows_the_status_map(run):
     for k in [k for k in curves if k.config == "baseline"]:
         curves[k] = dataclasses.replace(curves[k], status=rev)
     assert fd.fig12(dataclasses.replace(data, curves=curves), s).verdict == fd.DISAGREE
+
+
+def test_provenance_times_ignore_the_report_stage(run):
+    """The stage-log times are those of the computing stages: the report's own entry (logged after
+    report.md is written) does not change a rebuilt report."""
+    from fe_joint.report.provenance import provenance
+    _, _, data, _ = run
+    log = [{"stage": "mesh", "action": "ran", "time": "T1"}, {"stage": "dynamics", "action": "ran", "time": "T2"},
+           {"stage": "report", "action": "ran", "time": "T3"}, {"stage": "fe", "action": "cached", "time": "T4"}]
+    p = provenance(dataclasses.replace(data, stage_log=log))
+    assert (p["started"], p["finished"]) == ("T1", "T2")

@@ -92,8 +92,10 @@ def parameters_markdown(data: ReportData) -> list[str]:
 
 
 def _run_times(data: ReportData) -> tuple[str, str]:
-    """(first, last) time a stage of this run's current output ran, from the stage log."""
-    ran = [e["time"] for e in data.stage_log if e.get("action") == "ran" and "time" in e]
+    """(first, last) time a computing stage (mesh … dynamics) ran, from the stage log: not the
+    report's own entry, which is logged after the report is written (a rebuilt report is the same)."""
+    ran = [e["time"] for e in data.stage_log
+           if e.get("action") == "ran" and "time" in e and e.get("stage") in STAGES_READ]
     return (ran[0], ran[-1]) if ran else (NOT_RECORDED, NOT_RECORDED)
 
 
