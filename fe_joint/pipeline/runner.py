@@ -26,6 +26,7 @@ from typing import Callable
 
 from ..case import Case, case_to_toml
 from ..study.artifacts import check_files, file_record
+from .environment import run_environment
 from .guards import RunWarning
 
 #: the dynamics settings the study's curves depend on (not ``speed_study``: the speed stage's switch)
@@ -45,14 +46,14 @@ STAGE_INPUTS: dict[str, tuple[tuple[str, ...], str]] = {
     "speed": (("geometry", "material", "roughness", "contact", "dynamics"), "1"),
     # the report reads every section (titles, tables, the paper comparison)
     "report": (("geometry", "material", "preload", "reduction", "roughness", "contact",
-                "dynamics"), "2"),
+                "dynamics"), "3"),
 }
 STAGES: tuple[str, ...] = tuple(STAGE_INPUTS)
 #: what each stage writes, relative to the run folder (folders are walked); a stage may list its
 #: files itself instead (``StageContext.files``: the dynamics stage lists its study's jobs only)
 STAGE_OUTPUTS: dict[str, tuple[str, ...]] = {
     "mesh": ("mesh",), "fe": ("fe",), "contact": ("contact",), "dynamics": ("dynamics",),
-    "speed": ("speed",), "report": ("report.md", "summary.json", "figures"),
+    "speed": ("speed",), "report": ("report.md", "summary.json", "figures", "paraview"),
 }
 #: the effective case of a run, written into its folder (``fe-joint report DIR`` reads it)
 CASE_FILE = "case.toml"
@@ -212,7 +213,9 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
             _write_json_atomic(out / "stages" / f"{s}.json",
                                {"stage": s, "key": keys[s], "seconds": dt, "summary": summary,
                                 "run_id": run_id, "upstream_run": prev_run,
-                                "files": stage_files(out, s, ctx)})
+                                "files": stage_files(out, s, ctx),
+                                # what it ran on (after the stage: its imports are loaded)
+                                "environment": run_environment(comm)})
         prev_run = ctx.runs[s] = run_id
         _log(out, rank, {"stage": s, "action": "ran", "key": keys[s], "seconds": dt})
         ctx.print(f"[fe-joint] stage {s} done in {dt:.1f} s")

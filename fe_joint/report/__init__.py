@@ -19,13 +19,15 @@ from ..case import Case
 from .data import ReportData, load_report_data
 from .figures import draw_figures
 from .markdown import report_markdown
+from .paraview import FOLDER as PARAVIEW_FOLDER, write_interface_results
 from .summary import build_summary, write_summary
 
 __all__ = ["ReportData", "build_summary", "load_report_data", "write_report"]
 
 
 def write_report(out: Path, case: Case) -> dict:
-    """Draw the figures, write report.md and summary.json from a run's artifacts.
+    """Draw the figures, write report.md, summary.json and the per-element ParaView files
+    (``paraview/<curve>.xdmf``) from a run's artifacts.
 
     Args:
         out: the run's folder (stage manifests, fe/, contact/, dynamics/, speed/).
@@ -35,6 +37,7 @@ def write_report(out: Path, case: Case) -> dict:
     """
     data = load_report_data(Path(out), case)
     draw_figures(data, data.out / "figures")
+    write_interface_results(data, data.out / PARAVIEW_FOLDER)
     summary = build_summary(data)
     write_summary(summary, data.out / "summary.json")
     (data.out / "report.md").write_text(report_markdown(data, summary))

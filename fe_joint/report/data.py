@@ -13,7 +13,7 @@ import numpy as np
 
 from ..case import Case
 from ..model.reduced_model import ReducedModel
-from ..pipeline.runner import read_manifest
+from ..pipeline.runner import read_manifest, read_stage_log
 from ..study.artifacts import (BackboneKey, CurveKey, load_artifact, load_backbones, load_curves,
                                read_json_artifact, v3_job_name)
 from ..study.contact import SurfaceContact, load_surfaces
@@ -49,6 +49,9 @@ class ReportData:
         seeds: the contact stage's seed statistics (``contact/seeds.json``), None if missing.
         hardness: the hardness-capped sweep (``contact/hardness.json``), None if missing.
         backbones: every finished backbone of ``dynamics/backbones/`` ({} for a run without).
+        environments: stage → what it ran on (commit, versions, ranks, time: its manifest's
+            ``environment``; {} for stages run before it was recorded).
+        stage_log: the entries of ``DIR/stage_log.jsonl`` (stage, action, seconds, time).
     """
     out: Path
     case: Case
@@ -64,6 +67,8 @@ class ReportData:
     seeds: dict | None = None
     hardness: dict | None = None
     backbones: dict = field(default_factory=dict)
+    environments: dict[str, dict] = field(default_factory=dict)
+    stage_log: list[dict] = field(default_factory=list)
 
     @property
     def dynamics(self) -> dict:
@@ -177,4 +182,6 @@ def load_report_data(out: Path, case: Case) -> ReportData:
         speed=_read_json(out / "speed" / "speed_error.json"),
         seeds=_read_json(out / "contact" / "seeds.json"),
         hardness=_read_json(out / "contact" / "hardness.json"),
-        backbones=load_backbones(out / "dynamics"))
+        backbones=load_backbones(out / "dynamics"),
+        environments={s: m["environment"] for s, m in manifests.items() if "environment" in m},
+        stage_log=read_stage_log(out))

@@ -39,9 +39,12 @@ def _save(fig, path: Path) -> Path:
 
 def _map(ax, xy: np.ndarray, values: np.ndarray, title: str, cmap: str = "viridis",
          label: str = "", vmin: float | None = None, vmax: float | None = None,
-         hole: float | None = None) -> None:
-    """Scatter map of per-element values at their (x, y) in mm, with the bolt hole (diameter, mm)."""
-    sc = ax.scatter(xy[:, 0], xy[:, 1], c=values, s=18, cmap=cmap, vmin=vmin, vmax=vmax)
+         hole: float | None = None, ticks: dict | None = None) -> None:
+    """Scatter map of per-element values at their (x, y) in mm, with the bolt hole (diameter, mm);
+    ticks: colour-bar value → label (a categorical field)."""
+    # thin grey edges: light colours (a zero on a white-based map) stay visible
+    sc = ax.scatter(xy[:, 0], xy[:, 1], c=values, s=20, cmap=cmap, vmin=vmin, vmax=vmax,
+                    edgecolors="0.45", linewidths=0.3)
     if hole:
         from matplotlib.patches import Circle
         ax.add_patch(Circle((0, 0), hole / 2, fill=False, lw=0.8, color="k"))
@@ -51,45 +54,91 @@ def _map(ax, xy: np.ndarray, values: np.ndarray, title: str, cmap: str = "viridi
     ax.set_ylabel("y [mm]")
     cb = ax.figure.colorbar(sc, ax=ax, shrink=0.8)
     cb.set_label(label)
+    if ticks:
+        cb.set_ticks(list(ticks), labels=list(ticks.values()))
 
 
 def _grid_image(ax, field: np.ndarray, extent: tuple, title: str, label: str,
-                cmap: str = "viridis", log: bool = False) -> None:
-    """Image of a BEM grid field over the overlap (extent in mm); ``log``: log scale, ≤ 0 masked."""
+                cmap: str = "viridis", log: bool = False, vmin: float | None = None,
+                vmax: float | None = None, ticks: dict | None = None) -> None:
+    """Image of a BEM grid field over the overlap (extent in mm); ``log``: log scale, ≤ 0 masked;
+    vmin, vmax: a colour range shared with other panels (None: this field's); ticks: colour-bar
+    value → label (a categorical field)."""
     import matplotlib.colors as mc
     data = np.ma.masked_less_equal(field, 0) if log else field
-    norm = mc.LogNorm() if log and np.any(field > 0) else None
-    im = ax.imshow(data.T, origin="lower", extent=extent, cmap=cmap, norm=norm)
+    norm = mc.LogNorm(vmin=vmin, vmax=vmax) if log and np.any(field > 0) else None
+    kw = {} if norm is not None else {"vmin": vmin, "vmax": vmax}
+    im = ax.imshow(data.T, origin="lower", extent=extent, cmap=cmap, norm=norm, interpolation="nearest", **kw)
     ax.set_title(title, fontsize=9)
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
-    ax.figure.colorbar(im, ax=ax, shrink=0.8).set_label(label)
+    cb = ax.figure.colorbar(im, ax=ax, shrink=0.8)
+    cb.set_label(label)
+    if ticks:
+        cb.set_ticks(list(ticks), labels=list(ticks.values()))
+
+
+#: colour-bar labels of a contact map (1 = in contact)
+CONTACT_TICKS = {0.0: "no", 1.0: "yes"}
+
+
+def _legend_styles(ax, extra: list[tuple[str, str]], fontsize: int = 8) -> None:
+    """The axes' legend plus one grey proxy entry per (line style, label) in ``extra``."""
+    from matplotlib.lines import Line2D
+    handles, labels = ax.get_legend_handles_labels()
+    for ls, text in extra:
+        handles.append(Line2D([], [], color="grey", ls=ls))
+        labels.append(text)
+    ax.legend(handles, labels, fontsize=fontsize)
+
+
+def _zoom(ax, peaks_hz: list[float]) -> None:
+    """Frequency axis from 2.5 % below the lowest peak to 1.5 % above the highest (the sweeps'
+    bands are wider than the resonances they hold)."""
+    if peaks_hz:
+        ax.set_xlim(0.975 * min(peaks_hz), 1.015 * max(peaks_hz))
+
+
+def _plot_curve(ax, cr: CurveResult, color, label: str) -> None:
+    """A forced FRF, stable part solid, unstable part (Hill) dotted."""
+    ax.plot(cr.omega_hz, np.where(cr.stable, cr.amplitude, np.nan), color=color, label=label)
+    if not np.all(cr.stable):
+        ax.plot(cr.omega_hz, np.where(cr.stable, np.nan, cr.amplitude), ":", color=color, lw=1.6)
 
 
 def frf_configurations(data: ReportData, path: Path) -> Path:
-    """FRFs of every configuration, one panel per level (paper Figs. 11, 16).
+    """FRFs of every configuration, one panel per level (paper Figs. 11, 16), with each joint's
+    stuck (linear) FRF.
 
     Args:
         data: the run's artifacts.
         path: the PNG to write.
     Returns:
-        ``path``. Amplitudes in mm against Hz; unstable points dotted.
+        ``path``. Amplitudes in mm against Hz; unstable points dotted; the stuck FRFs dash-dot,
+        clipped at 1.4 × the largest forced peak of the panel.
     """
+    from .linear_frf import stuck_receptance
     plt = _plt()
-    levels = data.levels
-    fig, axes = plt.subplots(1, len(levels), figsize=(5 * len(levels), 4), squeeze=False)
+    levels, joints = data.levels, configuration_joints(data)
+    fig, axes = plt.subplots(1, len(levels), figsize=(5.2 * len(levels), 4.3), squeeze=False)
     for i, lv in enumerate(levels):
-        ax = axes[0, i]
+        ax, top = axes[0, i], 0.0
         for cfg in data.configs:
             cr = data.curve(cfg, i)
             if cr is None:
                 continue
-            ax.plot(cr.omega_hz, np.where(cr.stable, cr.amplitude, np.nan), color=COLORS[cfg], label=cfg)
-            ax.plot(cr.omega_hz, np.where(cr.stable, np.nan, cr.amplitude), ":", color=COLORS[cfg])
+            _plot_curve(ax, cr, COLORS[cfg], cfg)
+            top = max(top, float(np.max(cr.amplitude)))
+            if cfg in joints:
+                ax.plot(cr.omega_hz, lv * np.abs(stuck_receptance(data.rm, joints[cfg], cr.omega_hz)),
+                        "-.", color=COLORS[cfg], lw=0.8, alpha=0.7)
+        if top > 0:
+            ax.set_ylim(0, 1.4 * top)
+        _zoom(ax, [c.peak_hz for c in (data.curve(g, i) for g in data.configs) if c is not None])
         ax.set_title(f"excitation {lv:.3g} N ({lv / data.macroslip:.2f} × macroslip est.)", fontsize=9)
         ax.set_xlabel("frequency [Hz]")
         ax.set_ylabel("mass A amplitude, 1st harmonic [mm]")
-        ax.legend(fontsize=8)
+        _legend_styles(ax, [(":", "unstable (Hill)"), ("-.", "stuck joint, linear (clipped)")])
     return _save(fig, path)
 
 
@@ -107,13 +156,15 @@ def frf_roughness(data: ReportData, path: Path) -> Path:
     base = data.curve("baseline", data.mid)
     fig, ax = _plt().subplots(figsize=(6, 4))
     if base is not None:
-        ax.plot(base.omega_hz, base.amplitude, "k", label="baseline (smooth)")
-    for rq, cr in rq_curves:
-        ax.plot(cr.omega_hz, cr.amplitude, label=f"v3, Rq = {rq_label(rq)} µm")
+        _plot_curve(ax, base, "k", "baseline (smooth)")
+    cmap = _plt().get_cmap("viridis")
+    for j, (rq, cr) in enumerate(rq_curves):
+        _plot_curve(ax, cr, cmap(0.85 * j / max(len(rq_curves) - 1, 1)), f"v3, Rq = {rq_label(rq)} µm")
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("mass A amplitude [mm]")
     ax.set_title(f"roughness sweep at {data.levels[data.mid]:.3g} N", fontsize=9)
-    ax.legend(fontsize=8)
+    _zoom(ax, [cr.peak_hz for _, cr in rq_curves] + ([base.peak_hz] if base is not None else []))
+    _legend_styles(ax, [(":", "unstable (Hill)")])
     return _save(fig, path)
 
 
@@ -132,14 +183,26 @@ def pressure_morphology(data: ReportData, path: Path) -> Path:
     Returns:
         ``path``. Pressures in MPa, the rough ones on a log scale.
     """
+    import matplotlib.colors as mc
     rqs, extent = data.rqs, _extent(data)
-    fig, axes = _plt().subplots(1, 1 + len(rqs), figsize=(4.2 * (1 + len(rqs)), 3.6), squeeze=False)
+    fig, axes = _plt().subplots(2, 1 + len(rqs), figsize=(4.2 * (1 + len(rqs)), 7.4), squeeze=False)
     _grid_image(axes[0, 0], data.extra["p_s"], extent, "smooth FE pressure [MPa]", "MPa", cmap="jet")
+    pos = [data.surfaces[q].pressure[data.surfaces[q].pressure > 0] for q in rqs]
+    lo = min((float(p.min()) for p in pos if p.size), default=None)
+    hi = max((float(p.max()) for p in pos if p.size), default=None)
+    mask = data.extra["mask"].astype(bool)
+    binary = mc.ListedColormap(["white", "black"])
+    _grid_image(axes[1, 0], np.where(mask, 1.0, 0.0), extent, "usable overlap (white: the bolt hole)",
+                "usable", cmap=binary, vmin=0, vmax=1, ticks=CONTACT_TICKS)
     for k, rq in enumerate(rqs):
         sc = data.surfaces[rq]
         _grid_image(axes[0, k + 1], sc.pressure, extent,
-                    f"Rq = {rq_label(rq)} µm: contact {100 * sc.contact_fraction:.1f} %", "MPa (log)",
-                    cmap="jet", log=True)
+                    f"Rq = {rq_label(rq)} µm: pressure (common log scale)", "MPa (log)",
+                    cmap="jet", log=True, vmin=lo, vmax=hi)
+        _grid_image(axes[1, k + 1], (sc.pressure > 0).astype(float), extent,
+                    f"Rq = {rq_label(rq)} µm: contact morphology, {100 * sc.contact_fraction:.1f} % "
+                    "of the usable overlap", "in contact", cmap=binary, vmin=0, vmax=1,
+                    ticks=CONTACT_TICKS)
     return _save(fig, path)
 
 
@@ -161,36 +224,53 @@ def stiffness_maps(data: ReportData, path: Path) -> Path:
     if v3 is not None:
         panels.append(("k_t from loops (v3) [N/mm³]", v3["kt"]))
     fig, axes = _plt().subplots(1, len(panels), figsize=(4.4 * len(panels), 3.6), squeeze=False)
+    vmax = max(float(np.max(v)) for _, v in panels)     # one scale: the panels compare
     for ax, (title, v) in zip(axes[0], panels):
-        _map(ax, data.xy, v, title, hole=data.case.geometry.hole_diameter)
+        _map(ax, data.xy, v, title + " (common scale)", hole=data.case.geometry.hole_diameter,
+             vmin=0.0, vmax=vmax, label="N/mm³")
     return _save(fig, path)
 
 
-def status_energy(data: ReportData, path: Path) -> Path | None:
-    """Contact status and dissipated energy per area at resonance, top level (Figs. 12, 17).
+STATUS_LABEL = ""
+#: colour-bar labels of a status map
+STATUS_TICKS = dict(enumerate(STATUS_NAMES))
 
-    Args:
-        data: the run's artifacts.
-        path: the PNG to write.
+
+def status_energy_panels(data: ReportData, level: int, configs: list[str], path: Path) -> Path | None:
+    """Contact status (top row) and dissipated energy per area (bottom row, one colour scale for
+    all panels) at resonance for ``configs`` at level index ``level``.
+
     Returns:
-        ``path``, or None when none of baseline, v1, v3 has a top-level curve. Energy in
+        ``path``, or None when none of ``configs`` has a curve at that level. Energy in
         N·mm/mm² per cycle.
     """
     import matplotlib.colors as mc
-    top, hole = data.top, data.case.geometry.hole_diameter
-    show = [c for c in ("baseline", "v1", "v3") if data.curve(c, top) is not None]
+    hole = data.case.geometry.hole_diameter
+    show = [(c, data.curve(c, level)) for c in configs if data.curve(c, level) is not None]
     if not show:
         return None
     fig, axes = _plt().subplots(2, len(show), figsize=(4.4 * len(show), 7), squeeze=False)
     cmap = mc.ListedColormap(["tab:blue", "tab:green", "tab:red", "tab:orange", "lightgrey"])
-    for k, cfg in enumerate(show):
-        cr = data.curve(cfg, top)
-        _map(axes[0, k], data.xy, cr.status, f"{cfg}: status at resonance, {data.levels[top]:.3g} N",
-             cmap=cmap, vmin=-0.5, vmax=4.5, label="0 stuck 1 stick-slip 2 slip 3 part-open 4 open",
-             hole=hole)
-        _map(axes[1, k], data.xy, cr.energy / data.area, f"{cfg}: dissipated energy / area",
-             cmap="magma", label="N·mm/mm² per cycle", hole=hole)
+    emax = max(float(np.max(cr.energy / data.area)) for _, cr in show) or 1.0
+    for k, (cfg, cr) in enumerate(show):
+        n = np.bincount(np.asarray(cr.status, int), minlength=5)
+        _map(axes[0, k], data.xy, cr.status, f"{cfg}: status at resonance, {data.levels[level]:.3g} N\n"
+             f"stuck {n[0]}, stick–slip {n[1]}, slip {n[2]}, part-open {n[3]}, open {n[4]}",
+             cmap=cmap, vmin=-0.5, vmax=4.5, label=STATUS_LABEL, hole=hole, ticks=STATUS_TICKS)
+        _map(axes[1, k], data.xy, cr.energy / data.area,
+             f"{cfg}: dissipated energy / area, W = {cr.dissipated:.3g} N·mm", cmap="YlOrRd",
+             label="N·mm/mm² per cycle (common scale)", hole=hole, vmin=0.0, vmax=emax)
     return _save(fig, path)
+
+
+def status_energy(data: ReportData, path: Path) -> Path | None:
+    """Contact status and dissipated energy per area at resonance, top level, baseline, v1, v3
+    (Figs. 12, 17 at the top level; common energy scale).
+
+    Returns:
+        ``path``, or None when none of baseline, v1, v3 has a top-level curve.
+    """
+    return status_energy_panels(data, data.top, ["baseline", "v1", "v3"], path)
 
 
 def loop_elements(data: ReportData, cr: CurveResult) -> list[int]:
@@ -291,9 +371,15 @@ def keq_contact_fraction(data: ReportData, path: Path) -> Path:
     axes[1].set_xlabel("Rq [µm]")
     axes[1].set_ylabel("N/mm³")
     axes[1].legend(fontsize=8)
-    axes[2].plot(rqs, [100 * data.surfaces[q].contact_fraction for q in rqs], "o-", label="fe-joint")
+    usable = float(np.mean(data.extra["mask"]))      # usable share of the whole overlap
+    axes[2].plot(rqs, [100 * data.surfaces[q].contact_fraction for q in rqs], "o-",
+                 label="fe-joint / usable overlap")
+    axes[2].plot(rqs, [100 * usable * data.surfaces[q].contact_fraction for q in rqs], "s--",
+                 label="fe-joint / whole overlap (paper's)")
     pq = sorted(PAPER["contact_fraction"])
-    axes[2].plot(pq, [PAPER["contact_fraction"][q] for q in pq], "kx--", label="paper")
+    # markers only: the paper gives no Rq 5 value, so no line may suggest one
+    axes[2].plot(pq, [PAPER["contact_fraction"][q] for q in pq], "kx", ms=8, mew=2,
+                 label="paper (/ whole overlap)")
     axes[2].set_xlabel("Rq [µm]")
     axes[2].set_ylabel("real contact area [%]")
     axes[2].legend(fontsize=8)
@@ -337,5 +423,6 @@ def draw_figures(data: ReportData, folder: Path) -> list[Path]:
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    written = [draw(data, folder / f"{name}.png") for name, draw in FIGURES.items()]
+    from .paper_figures import PAPER_FIGURES      # it imports this module's helpers
+    written = [draw(data, folder / f"{name}.png") for name, draw in {**FIGURES, **PAPER_FIGURES}.items()]
     return [p for p in written if p is not None]

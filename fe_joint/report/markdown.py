@@ -6,6 +6,10 @@ import numpy as np
 from ..model.interface_motion import RIGID_NAMES
 from ..study.artifacts import rq_label
 from . import backbones, like_for_like, stiffness_definitions
+from .findings import findings_markdown
+from .paraview import paraview_markdown
+from .provenance import parameters_markdown, provenance_markdown
+from .table1 import table1_markdown
 from .data import PAPER, ReportData
 
 
@@ -191,13 +195,17 @@ def report_markdown(data: ReportData, summary: dict) -> str:
         Markdown text ending in a newline; figures are linked as ``figures/<name>.png``.
     """
     head = _header(data, summary)
-    L = (head[:2] + _warnings(summary) + head[2:] + _levels(data, summary) + _frf_table(data, summary)
+    L = (head[:2] + _warnings(summary) + findings_markdown(summary["findings"]) + head[2:]
+         + parameters_markdown(data) + table1_markdown(data)
+         + _levels(data, summary) + _frf_table(data, summary)
          + _damping(data, summary) + _contact(data, summary) + _contact_area(data, summary)
          + _seeds(data, summary) + _hardness(data, summary)
          + stiffness_definitions.markdown(data, summary) + _state_figures()
+         + _paper_figures(data) + paraview_markdown(data)
          + _joint_state(summary) + _interface_motion(summary)
          + _v3(summary) + backbones.markdown(data, summary)
-         + like_for_like.markdown(data, summary) + _cost(summary) + _speed(data.speed))
+         + like_for_like.markdown(data, summary) + _cost(summary) + _speed(data.speed)
+         + [""] + provenance_markdown(data, summary["provenance"]))
     return "\n".join(L) + "\n"
 
 
@@ -372,3 +380,29 @@ def _hardness(data: ReportData, s: dict) -> list[str]:
                  f"{a['kn_eq']:.3g} → {b['kn_eq']:.3g} | {a['kt_eq']:.3g} → {b['kt_eq']:.3g} | "
                  f"{a['stuck_hz']:.2f} → {b['stuck_hz']:.2f} | {a['loaded_elements']} → {b['loaded_elements']} |")
     return L + [""]
+
+
+#: the counterparts of the paper's figures (paper_figures.py): file stem → caption
+PAPER_FIGURE_CAPTIONS = {
+    "fig12_smooth_maps": "Paper Fig. 12: baseline (top) and smooth-ms (bottom): FE pressure, k_n, "
+                         "status and dissipated energy at resonance (common scales per column).",
+    "fig13_heights": "Paper Fig. 13: heights of the comparison surface and its contact morphology "
+                     "under the bolt load.",
+    "fig17_all_configurations": "Paper Fig. 17: every configuration at the lowest level (common "
+                                "energy scale; the top level is in the figure above).",
+    "fig21_levels": "Paper Fig. 21 at every level: forced FRFs where swept (solid, unstable dotted), "
+                    "elsewhere synthesized from the joint's backbone (dashed).",
+    "fig22_loops_rq": "Paper Fig. 22: whole-joint loops at resonance against Rq (area = dissipated "
+                      "energy per cycle).",
+    "ratio_maps_v3_v2": "v3 / v2 per element (k_n, k_t) and v3's k_t/k_n over Mindlin's ratio "
+                        "(paper Fig. 14 b vs c).",
+}
+
+
+def _paper_figures(data: ReportData) -> list[str]:
+    """Links to the paper-figure counterparts that were drawn, with their captions."""
+    L = ["## Counterparts of the paper's figures", ""]
+    for name, cap in PAPER_FIGURE_CAPTIONS.items():
+        if (data.out / "figures" / f"{name}.png").exists():
+            L += [cap, "", f"![{name}](figures/{name}.png)", ""]
+    return L if len(L) > 2 else []

@@ -15,6 +15,8 @@ from . import like_for_like
 from .backbones import backbones_section
 from .stiffness_definitions import section as stiffness_definitions_section
 from .data import STAGES_READ, ReportData
+from .findings import findings, findings_summary
+from .provenance import provenance
 from .stiffness import configuration_joints, k_eq_table, rq_joints
 
 #: the mesh statistics copied from the mesh stage
@@ -128,6 +130,9 @@ def build_summary(data: ReportData) -> dict:
     summary["stiffness_definitions"] = stiffness_definitions_section(data)
     if data.speed:
         summary["speed_vs_error"] = data.speed
+    summary["provenance"] = provenance(data)
+    # last: the findings read the numbers above
+    summary["findings"] = findings_summary(findings(data, summary))
     return summary
 
 
