@@ -216,6 +216,19 @@ def _evaluate(hb, force: np.ndarray, U: np.ndarray, w: float) -> _Eval:
     return _Eval(R, g, nl, Dg, max(np.linalg.norm(U), np.linalg.norm(Ul), 1e-300))
 
 
+def _try_evaluate(hb, force: np.ndarray, U: np.ndarray, w: float) -> _Eval | None:
+    """:func:`_evaluate`, or None where the AFT cannot close an element's friction cycle at that
+    iterate (the march's ``ConvergenceError``). Such a trial point is treated like a residual
+    that did not decrease (line search) or a failed corrector (the step is shortened), never as
+    the end of the sweep: an iterate thrown far by a predictor can ask for a cycle that takes
+    more than the march's budget, and whether it does changed with a 1e-10 change of the
+    reduced model (quick preset, v1 at the top level: the sweep failed outright)."""
+    try:
+        return _evaluate(hb, force, U, w)
+    except ConvergenceError:
+        return None
+
+
 def _tangent(hb, force: np.ndarray, sc: _Scaling, w: float, ev: _Eval, prev: np.ndarray,
              ref_sign: int | None, exact_sign: bool = False) -> tuple[np.ndarray, int]:
     """Predictor: unit tangent of the branch at the point evaluated in ``ev`` (frequency w, rad/s).
@@ -253,14 +266,15 @@ def _line_search(hb, force: np.ndarray, U: np.ndarray, w: float, dU: np.ndarray,
     Returns:
         (alpha, U + a dU, w + a dw, evaluation there or None) where ``a`` is the last alpha
         tried; after 6 failed tries alpha has been halved once more than ``a`` (kept as it was).
-        The caller rejects the step when the frequency of the last try is <= 0.
+        The caller rejects the step when the frequency of the last try is <= 0 or the last try
+        could not be evaluated (None).
     """
     alpha, evt = 1.0, None
     for _ in range(6):
         Ut, wt = U + alpha * dU, w + alpha * dw
         if wt > 0:
-            evt = _evaluate(hb, force, Ut, wt)
-            if np.linalg.norm(evt.R) <= (1 - 1e-4 * alpha) * r:
+            evt = _try_evaluate(hb, force, Ut, wt)
+            if evt is not None and np.linalg.norm(evt.R) <= (1 - 1e-4 * alpha) * r:
                 break
         alpha *= 0.5
     return alpha, Ut, wt, evt
@@ -275,10 +289,13 @@ def _correct(hb, force: np.ndarray, sc: _Scaling, Yp: np.ndarray, t: np.ndarray,
         max_corrector: iteration limit.
 
     Returns:
-        _Correction; ``ok`` False if the limit is reached or a step would make w <= 0.
+        _Correction; ``ok`` False if the limit is reached, a step would make w <= 0 or the AFT
+        fails at the predictor or a trial iterate (``ev`` None when it failed at the predictor).
     """
     U, w = sc.unscale(Yp)
-    ev = _evaluate(hb, force, U, w)
+    ev = _try_evaluate(hb, force, U, w)
+    if ev is None:
+        return _Correction(False, U, w, None, 1)
     step = np.inf
     for it in range(1, max_corrector + 1):
         r = np.linalg.norm(ev.R)
@@ -289,7 +306,7 @@ def _correct(hb, force: np.ndarray, sc: _Scaling, Yp: np.ndarray, t: np.ndarray,
         tU, tw = sc.border(t)
         [(dU, dw)], _ = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(ev.R, cval)])
         alpha, Ut, wt, evt = _line_search(hb, force, U, w, dU, dw, r)
-        if wt <= 0:
+        if wt <= 0 or evt is None:
             return _Correction(False, U, w, ev, it)
         step = max(np.linalg.norm(alpha * dU), abs(alpha * dw) / sc.ws * ev.scale)
         U, w, ev = Ut, wt, evt
@@ -411,8 +428,10 @@ class _Branch:
                 return corr, True
             self.ds *= 0.5
             if self.ds < s.ds_min:
+                res = (float("nan") if corr.ev is None else
+                       float(np.linalg.norm(corr.ev.R) / corr.ev.scale))
                 raise ConvergenceError(f"continuation step fell below ds_min near omega = {self.w:.6g} rad/s",
-                                       float(np.linalg.norm(corr.ev.R) / corr.ev.scale))
+                                       res)
 
     def _amplitude_step_ok(self, corr: _Correction) -> bool:
         """The arc length lives on the contact unknowns; the response DOF may resonate in a mode
@@ -438,7 +457,9 @@ class _Branch:
         """
         self._exact_reference()
         Up, wp = self.sc.unscale(Yp)
-        evp = _evaluate(self.hb, self.force, Up, wp)
+        evp = _try_evaluate(self.hb, self.force, Up, wp)
+        if evp is None:
+            return failed, False
         tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign, exact_sign=True)
         Yc = self.sc.Y(failed.U, failed.w)
         corr = _correct(self.hb, self.force, self.sc, Yc + self.ds * tb, tb, self.settings.max_corrector)

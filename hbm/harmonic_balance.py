@@ -500,14 +500,25 @@ class HarmonicBalance:
                 self._last = (g, (nl, Dg))
                 return U, r / self._scale(U, Ul), it - 1, nl.size
             (dU,) = self.linsolve(omega, nl, Dg, [-R])
-            alpha = 1.0
+            alpha, trial = 1.0, None
             for _ in range(10):
-                Ut = U + alpha * dU
-                Rt, gt, nlt, Dgt = self.residual(Ut, omega, Ul)
-                rt = np.linalg.norm(Rt)
-                if rt <= (1 - 1e-4 * alpha) * r:
+                try:
+                    res = self.residual(U + alpha * dU, omega, Ul)
+                except ConvergenceError:
+                    # the AFT cannot close a friction cycle at this trial: try a shorter step
+                    alpha *= 0.5
+                    continue
+                trial = (alpha, res)
+                if np.linalg.norm(res[0]) <= (1 - 1e-4 * alpha) * r:
                     break
                 alpha *= 0.5
+            if trial is None:
+                raise ConvergenceError(f"Newton at omega = {omega:.6g} rad/s: the friction cycles "
+                                       "do not close along the Newton step", r / self._scale(U, Ul))
+            # the last trial that could be evaluated (as before: kept even without a decrease,
+            # and the step of the convergence test is the final alpha's)
+            a_t, (Rt, gt, nlt, Dgt) = trial
+            Ut, rt = U + a_t * dU, np.linalg.norm(Rt)
             step = alpha * np.linalg.norm(dU)
             U, R, g, nl, Dg, r = Ut, Rt, gt, nlt, Dgt, rt
         if self.converged(r, self._scale(U, Ul), step):

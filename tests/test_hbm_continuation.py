@@ -235,3 +235,34 @@ def test_gmres_path_passes_corner_folds_like_the_dense_path():
     # same points; at the corners near the peak the amplitude is sensitive (1e-6 apart there)
     assert len(a.omega) == len(b.omega) and np.max(np.abs(a.omega - b.omega)) <= 1e-6
     assert np.max(np.abs(a.amplitude - b.amplitude) / a.amplitude) <= 1e-5
+
+
+def test_a_friction_cycle_that_does_not_close_shortens_the_step(monkeypatch):
+    """The AFT's march raises ConvergenceError when a cycle does not close within its budget.
+    At a trial point of the corrector or of Newton's line search that is a failed trial (a
+    shorter step), not the end of the sweep: with every 7th evaluation failing, the closed-form
+    Jenkins curve is traced to the band end and its points are solutions as before."""
+    from hbm import ConvergenceError
+    m, k, cc, kt, fs, F = 1.0, 1.0, 0.02, 1.0, 0.1, 0.1
+    s = LinearStructure([[m]], [[k]], [[cc]])
+    c = FrictionContacts(np.array([[[0, -1, -1], [-1, -1, -1]]]), kt=kt, kn=1.0, mu=fs, n0=1.0)
+    hb = HarmonicBalance(s, c, harmonics=1, samples=256)
+    calls = {"n": 0, "failed": 0}
+    evaluate = FrictionContacts.evaluate
+
+    def flaky(self, U, fourier, jacobian=True):
+        calls["n"] += 1
+        if calls["n"] % 7 == 0:
+            calls["failed"] += 1
+            raise ConvergenceError("friction cycle did not close in 200 periods", 1e-3)
+        return evaluate(self, U, fourier, jacobian)
+    monkeypatch.setattr(FrictionContacts, "evaluate", flaky)
+    frf = hb.frf(0.7, 1.8, np.array([F]), dof=0, ds_max=0.3, max_domega=1.1 / 40)
+    assert calls["failed"] >= 10
+    assert abs(frf.omega[-1] - 1.8) <= 1e-12
+    ref = np.array([jenkins_frf_h1(w, m, k, cc, kt, fs, F)[0] for w in frf.omega])
+    # the AFT's sampling error at n_t = 256 (test_frf_curve_matches_closed_form_h1: 6e-5 at 1024)
+    assert np.max(np.abs(frf.amplitude - ref) / ref) <= 1e-3
+    # and a Newton solve at fixed frequency gets past a failing trial too
+    sol = hb.solve(1.2, np.array([F]))
+    assert sol.amplitude(0) == pytest.approx(jenkins_frf_h1(1.2, m, k, cc, kt, fs, F)[0], rel=1e-3)
