@@ -52,7 +52,7 @@ STAGES: tuple[str, ...] = tuple(STAGE_INPUTS)
 #: files itself instead (``StageContext.files``: the dynamics stage lists its study's jobs only)
 STAGE_OUTPUTS: dict[str, tuple[str, ...]] = {
     "mesh": ("mesh",), "fe": ("fe",), "contact": ("contact",), "dynamics": ("dynamics",),
-    "speed": ("speed",), "report": ("report.md", "summary.json", "figures"),
+    "speed": ("speed",), "report": ("report.md", "summary.json", "timings.json", "figures"),
 }
 #: the effective case of a run, written into its folder (``fe-joint report DIR`` reads it)
 CASE_FILE = "case.toml"

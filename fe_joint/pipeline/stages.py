@@ -276,12 +276,13 @@ def stage_speed(ctx: StageContext) -> dict:
 
 
 def stage_report(ctx: StageContext) -> dict:
-    """Figures, report.md, summary.json from the artifacts of the earlier stages (rank 0)."""
+    """Figures, report.md, summary.json, timings.json from the artifacts of the earlier stages
+    (rank 0)."""
     from ..report import write_report
     if ctx.rank == 0:
         write_report(ctx.out, ctx.case)
         ctx.print(f"[fe-joint] report: {ctx.path('report.md')}")
-    return {"written": ["report.md", "summary.json", "figures"]}
+    return {"written": ["report.md", "summary.json", "timings.json", "figures"]}
 
 
 REGISTRY = {"mesh": stage_mesh, "fe": stage_fe, "contact": stage_contact,

@@ -1,4 +1,4 @@
-"""The report of a run: ``report.md``, ``figures/*.png`` and ``summary.json``.
+"""The report of a run: ``report.md``, ``figures/*.png``, ``summary.json`` and ``timings.json``.
 
 Reads the artifacts of the earlier stages (rank 0 only) and draws the figures of the paper for our
 resonator: FRFs per configuration and level (paper Figs. 11, 16) and versus Rq (Fig. 21); maps of
@@ -19,13 +19,14 @@ from ..case import Case
 from .data import ReportData, load_report_data
 from .figures import draw_figures
 from .markdown import report_markdown
-from .summary import build_summary, write_summary
+from .summary import build_summary, build_timings, write_summary
 
-__all__ = ["ReportData", "build_summary", "load_report_data", "write_report"]
+__all__ = ["ReportData", "build_summary", "build_timings", "load_report_data", "write_report"]
 
 
 def write_report(out: Path, case: Case) -> dict:
-    """Draw the figures, write report.md and summary.json from a run's artifacts.
+    """Draw the figures, write report.md, summary.json and timings.json from a run's artifacts
+    (summary.json holds no wall time: the same inputs give the same bytes).
 
     Args:
         out: the run's folder (stage manifests, fe/, contact/, dynamics/, speed/).
@@ -35,7 +36,8 @@ def write_report(out: Path, case: Case) -> dict:
     """
     data = load_report_data(Path(out), case)
     draw_figures(data, data.out / "figures")
-    summary = build_summary(data)
+    summary, timings = build_summary(data), build_timings(data)
     write_summary(summary, data.out / "summary.json")
-    (data.out / "report.md").write_text(report_markdown(data, summary))
+    write_summary(timings, data.out / "timings.json")
+    (data.out / "report.md").write_text(report_markdown(data, summary, timings))
     return summary
