@@ -17,6 +17,13 @@ Exit status 1 when a peak differs by more than ``--f-tol`` (1e-7) in frequency o
 (1e-6) in amplitude, or a point count by more than ``--n-tol`` (5 %) — the tolerances of the
 README's "In parallel" section; 2 when a run fails.
 
+``--perturb EPS --run DIR --curve NAME``: no runs on N ranks; instead the amplification of
+round-off by the dynamics alone. The finished run ``DIR``'s reduced model gets a random
+symmetric relative perturbation of K and M (A_ij (1 + EPS r_ij), r standard normal, one seed per
+row of ``--seeds``), the curve NAME (e.g. ``baseline@L1``; a fixed configuration) is computed
+again from it, and the table shows how far its stuck frequency, peak and point count moved from
+the unperturbed model's. Exit 1 beyond the same tolerances.
+
 ``--small``: the case of the MPI test (tests/test_workflow.py, ``MPI_CASE``): the quick preset
 with one configuration (baseline, and the Rq sweep's v3 on its one surface, one pass), one level.
 """
@@ -136,6 +143,65 @@ def compare(d1: Path, d2: Path, f_tol: float, a_tol: float, n_tol: float, label:
     return bad
 
 
+def perturbed_model(rm, eps: float, seed: int):
+    """A copy of the reduced model with K and M changed by a random symmetric relative ``eps``."""
+    import copy
+    out = copy.copy(rm)
+    if eps == 0:
+        return out
+    g = np.random.default_rng(seed)
+    for name in ("K", "M"):
+        a = np.asarray(getattr(rm, name))
+        r = g.standard_normal(a.shape)
+        setattr(out, name, a * (1 + eps * 0.5 * (r + r.T)))
+    return out
+
+
+def perturb(run_dir: Path, curve: str, eps: float, seeds: int, f_tol: float, a_tol: float,
+            n_tol: float) -> int:
+    """The ``--perturb`` table (see the module docstring); returns the rows beyond tolerance."""
+    from fe_joint.case import load_case
+    from fe_joint.model.joint import stuck_modes
+    from fe_joint.model.reduced_model import ReducedModel
+    from fe_joint.study import contact as ms
+    from fe_joint.study.configurations import choose_levels, fixed_joints
+    from fe_joint.study.frf import SweepSettings, frf
+    case = load_case(run_dir / "case.toml")
+    rm = ReducedModel.load(str(run_dir / "fe" / "reduced_model.h5"))
+    setup = ms.interface_setup(rm, case.geometry, case.material, case.roughness)
+    surfaces, extra = ms.load_surfaces(run_dir / "contact" / "surfaces.npz")
+    joints = fixed_joints(setup, surfaces, extra["kn_smooth"], case)
+    levels, _ = choose_levels(rm, joints["baseline"], case)
+    config, _, li = curve.partition("@L")
+    joint, level = joints[config], levels[int(li)]
+    print(f"{curve} ({level:.4g} N) of {run_dir}, K and M perturbed by {eps:g} (relative, random "
+          "symmetric)")
+    print(f"  {'seed':>4s} {'stuck f [Hz]':>14s} {'peak f [Hz]':>14s} {'peak A [mm]':>12s} "
+          f"{'points':>6s} {'Δf_stuck':>9s} {'Δf':>9s} {'ΔA':>9s} {'Δn/n':>6s}")
+    ref, bad = None, 0
+    for seed in range(seeds + 1):
+        m = perturbed_model(rm, eps if seed else 0.0, seed)
+        f_lin = stuck_modes(m.K, m.M, m.pair_dofs, joint).frequency
+        try:
+            cr = frf(m, joint, level, f_lin, SweepSettings.from_case(case))
+        except Exception as e:   # a failed sweep is a row of the table, and beyond tolerance
+            print(f"  {seed:4d} {f_lin:14.8f} failed: {type(e).__name__}: {e}")
+            bad += 1
+            continue
+        row = (f_lin, cr.peak_hz, cr.peak_amplitude, cr.n_points)
+        if ref is None:
+            ref = row
+            print(f"  {seed:4d} {f_lin:14.8f} {cr.peak_hz:14.8f} {cr.peak_amplitude:12.8f} {cr.n_points:6d}")
+            continue
+        d = [abs(row[i] - ref[i]) / ref[i] for i in range(3)] + [count_rel(row[3], ref[3])]
+        over = d[1] > f_tol or d[2] > a_tol or d[3] > n_tol
+        bad += over
+        print(f"  {seed:4d} {f_lin:14.8f} {cr.peak_hz:14.8f} {cr.peak_amplitude:12.8f} {cr.n_points:6d} "
+              f"{d[0]:9.1e} {d[1]:9.1e} {d[2]:9.1e} {100 * d[3]:5.1f}%{'  <-- beyond' if over else ''}",
+              flush=True)
+    return bad
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("case", nargs="?", help="case file (default: the embedded case)")
@@ -147,7 +213,17 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--a-tol", type=float, default=1e-6)
     p.add_argument("--n-tol", type=float, default=0.05)
     p.add_argument("--compare-only", action="store_true", help="compare two finished runs")
+    p.add_argument("--perturb", type=float, help="relative perturbation of K and M (no runs)")
+    p.add_argument("--run", help="--perturb: a finished run's folder")
+    p.add_argument("--curve", default="baseline@L1", help="--perturb: the curve to recompute")
+    p.add_argument("--seeds", type=int, default=2, help="--perturb: perturbed models")
     a = p.parse_args(argv)
+    if a.perturb is not None:
+        if not a.run:
+            p.error("--perturb needs --run DIR (a finished run)")
+        bad = perturb(Path(a.run), a.curve, a.perturb, a.seeds, a.f_tol, a.a_tol, a.n_tol)
+        print(f"\n{bad} rows beyond the tolerances" if bad else "\nall within the tolerances")
+        return 1 if bad else 0
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     case = a.case
