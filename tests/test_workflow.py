@@ -61,7 +61,7 @@ REF_TOLERANCES = (  # backbones: checked by their own tests below (SNMS vs force
                   ("stuck_hz/std", 1e-3),
                   ("check-linear@tiny/zeta_fric", None), ("zeta_from_amplitude", 1e-4), ("zeta_", 1e-2),
                   ("loss_factor", 1e-2), ("modal_amplitude", 1e-4), ("slip_onset", 1e-4),
-                  ("n_points", None), ("n_nonlinear", None), ("coupling_rel_error", None),
+                  ("n_points", None), ("/points", None), ("n_nonlinear", None), ("coupling_rel_error", None),
                   ("linear_peak_rel_error", None), ("check-linear@tiny/dissipated", None),
                   ("joint_shear", 1e-2), ("dissipated", 1e-2), ("/v3/", 1e-2),
                   ("interface_motion", 1e-4), ("peak_", 1e-4), ("reduced_vs_full", 1e-3),

@@ -363,8 +363,6 @@ def _polish_peak(hb, force: np.ndarray, dof: int, res, k: int, iterations: int =
 PEAK_STENCIL = (1e-4, 1e-5)
 #: Peak refinement: stop when the frequency step is below this (relative)
 PEAK_FTOL = 1e-10
-#: Peak refinement: a stencil that is not concave is shrunk by this factor, down to this width
-PEAK_SHRINK, PEAK_STENCIL_MIN = 0.1, 1e-7
 
 
 def _refine_peak(hb, force: np.ndarray, dof: int, sol, iterations: int = 8):
@@ -381,11 +379,10 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, iterations: int = 8):
     steps wander by ≈ 1.5e-8 relative. h shrinks from 1e-4 to 1e-5 with the step, so a start
     far from the peak still converges.
 
-    Nothing here may depend on the path that found the start: a strict solve that fails is
-    repeated at the sweep's tolerances (it used to end the refinement and return the start, the
-    polished point, which put one e2e peak 1.9e-5 off in one run of two), and a stencil that is
-    not concave (a corner of the sampled friction law) is shrunk by ``PEAK_SHRINK`` down to
-    ``PEAK_STENCIL_MIN`` before the best of its three points is kept.
+    A strict solve that fails is repeated at the sweep's tolerances: it used to end the
+    refinement and return the start, the polished point, which depends on the path (one e2e peak
+    was 1.9e-5 off in one run of two). Where the stencil is not concave (a corner of the sampled
+    friction law) the best of its three points is kept.
 
     Args:
         hb: the HarmonicBalance of the curve (its tolerances are restored on return).
@@ -395,9 +392,8 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, iterations: int = 8):
         iterations: Newton iterations at most.
 
     Returns:
-        the Solution at the refined peak (the best stencil point if even the narrowest stencil
-        is not concave; the best point solved so far, or ``sol``, if a solve fails at both
-        tolerances).
+        the Solution at the refined peak (the best stencil point where the stencil is not
+        concave; the last iterate, or ``sol``, if a solve fails at both tolerances).
     """
     fast = hb.tol, hb.krylov_tol
     hb.tol, hb.krylov_tol = SWEEP_TOLERANCES[1]
@@ -421,10 +417,7 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, iterations: int = 8):
             hi = solve(w * (1 + h), best)
             x0, xl, xh = best.amplitude(dof), lo.amplitude(dof), hi.amplitude(dof)
             curv = xh - 2 * x0 + xl
-            if not curv < 0:         # not concave at this scale: a narrower stencil, or the best
-                if h * PEAK_SHRINK >= PEAK_STENCIL_MIN:
-                    h *= PEAK_SHRINK
-                    continue
+            if not curv < 0:         # not concave at this scale: keep the best of the three
                 best = max((best, lo, hi), key=lambda s: s.amplitude(dof))
                 break
             # a Newton step beyond the stencil is trusted only up to twice its width
@@ -434,8 +427,8 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, iterations: int = 8):
             if abs(step) <= PEAK_FTOL * w:
                 break
             h = float(np.clip(abs(step) / w, PEAK_STENCIL[1], PEAK_STENCIL[0]))
-        return best
     except ConvergenceError:
-        return best
+        pass
     finally:
         hb.tol, hb.krylov_tol = fast
+    return best
