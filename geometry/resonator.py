@@ -196,6 +196,26 @@ class ResonatorMesh:
         """Number of matched interface node pairs."""
         return int(self.pair_nodes.shape[0])
 
+    #: the arrays and integers :meth:`save` writes (everything but the parameters and the time)
+    _SAVED = ("points", "cells", "cell_markers", "facets", "facet_markers", "pair_nodes", "pair_xyz",
+              "pair_area", "excitation_node", "response_node")
+
+    def save(self, path) -> None:
+        """Write the mesh as ``.npz`` (bit-exact; the parameters are the case's, not stored).
+
+        A later stage builds its FE model from this file rather than meshing again: gmsh's
+        high-order node placement is not repeatable to the last bit (README, "In parallel")."""
+        np.savez(path, **{k: np.asarray(getattr(self, k)) for k in self._SAVED})
+
+    @classmethod
+    def load(cls, path, params: ResonatorParams) -> "ResonatorMesh":
+        """Read a mesh written by :meth:`save`; ``params`` are the geometry it was built from."""
+        with np.load(path, allow_pickle=False) as d:
+            kw = {k: d[k] for k in cls._SAVED}
+        for k in ("excitation_node", "response_node"):
+            kw[k] = int(kw[k])
+        return cls(params=params, **kw)
+
 
 def nominal_volumes(params: ResonatorParams) -> dict[str, float]:
     """Analytic volumes of the parts, mm³.

@@ -218,17 +218,44 @@ def test_peaks_equal_the_curves(report):
 
 
 def test_levels_v3_timings_speed(report):
-    _, w, s = report
+    run, w, s = report
     assert s["levels_N"] == LEVELS
     assert s["levels_over_macroslip"] == pytest.approx([0.1, 0.3], rel=1e-15)
     assert s["macroslip_estimate_N"] == MACROSLIP
     assert s["stuck_frequency_hz"]["baseline"] == 251.0
     assert s["first_elastic_hz_full_free"] == 250.0
     assert s["mesh"] == {"n_nodes": 40, "n_cells": 60, "n_dofs": 120, "n_pairs": NE}
-    assert s["v3"] == {"v3-rq5": {"converged": True, "passes": 3, "history": w["history"]}}
-    assert s["timings_s"]["stages"] == {"mesh": 1.5, "fe": 2.5, "contact": 0.5, "dynamics": 9.0}
-    assert s["timings_s"]["contact"] == {"1": {"global": 0.1}, "5": {"global": 0.2}}
-    assert s["speed_vs_error"] == w["speed"]
+    # the history without its wall times: those are in timings.json, never in summary.json
+    no_time = [{k: v for k, v in x.items() if k != "seconds"} for x in w["history"]]
+    assert s["v3"] == {"v3-rq5": {"converged": True, "passes": 3, "history": no_time}}
+    t = json.loads((run / "timings.json").read_text())
+    assert t["stages"] == {"mesh": 1.5, "fe": 2.5, "contact": 0.5, "dynamics": 9.0}
+    assert t["contact"] == {"1": {"global": 0.1}, "5": {"global": 0.2}}
+    assert t["v3"] == {"v3-rq5": [x.get("seconds") for x in w["history"]]}
+    assert t["curves"] == {k.name: cr.seconds for k, cr in w["curves"].items()}
+    assert t["speed_vs_error"] == w["speed"]
+    assert "speed_vs_error" not in s and "timings_s" not in s
+
+
+def test_summary_holds_no_wall_time(report):
+    """No key of summary.json is a wall time (compare.TIMING_KEYS), so two runs that compute the
+    same numbers write the same bytes; the report's cost table reads timings.json."""
+    from fe_joint.report.compare import TIMING_KEYS
+    run, w, s = report
+
+    def keys(x):
+        if isinstance(x, dict):
+            for k, v in x.items():
+                yield k
+                yield from keys(v)
+        elif isinstance(x, list):
+            for v in x:
+                yield from keys(v)
+    assert not TIMING_KEYS & set(keys(s))
+    md = (run / "report.md").read_text()
+    t = json.loads((run / "timings.json").read_text())
+    for name, sec in t["curves"].items():
+        assert f"| {name} | {s['peaks'][name]['n_points']} | {sec:.1f} |" in md
 
 
 BLOCKED_RUN = """

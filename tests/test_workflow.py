@@ -61,7 +61,7 @@ REF_TOLERANCES = (  # backbones: checked by their own tests below (SNMS vs force
                   ("stuck_hz/std", 1e-3),
                   ("check-linear@tiny/zeta_fric", None), ("zeta_from_amplitude", 1e-4), ("zeta_", 1e-2),
                   ("loss_factor", 1e-2), ("modal_amplitude", 1e-4), ("slip_onset", 1e-4),
-                  ("n_points", None), ("n_nonlinear", None), ("coupling_rel_error", None),
+                  ("n_points", None), ("/points", None), ("n_nonlinear", None), ("coupling_rel_error", None),
                   ("linear_peak_rel_error", None), ("check-linear@tiny/dissipated", None),
                   ("joint_shear", 1e-2), ("dissipated", 1e-2), ("/v3/", 1e-2),
                   ("interface_motion", 1e-4), ("peak_", 1e-4), ("reduced_vs_full", 1e-3),
@@ -230,6 +230,40 @@ def test_damaged_curve_and_new_level_rerun_only_their_jobs(run: Path, tmp_path: 
             assert b["peaks"][f"{head}@L{int(i) + 1}"]["peak_hz"] == p["peak_hz"], name
 
 
+def test_rerun_on_the_same_mesh_writes_the_same_summary_bytes(run: Path, tmp_path: Path) -> None:
+    """Determinism on one rank: the fe stage and every stage after it run again (``--force``) on
+    the mesh the mesh stage wrote and give bit-identical output: the reduced model's arrays (so
+    every FRF job's cache key matches and no curve is recomputed), the contact surfaces and
+    summary.json, which holds no wall time — byte for byte except the backbones, which are
+    recomputed on every dynamics run: one of them (v3-rq1) ended 1 ulp apart at its last point
+    in one such rerun (source not found: not a timing; the synthesis then moved its L2 peak by
+    3e-9), so they are compared to 1e-8."""
+    import hashlib
+    from fe_joint.model.reduced_model import ReducedModel
+    out = _copy_run(run, tmp_path / "again")
+    case = tmp_path / "case.toml"
+    case.write_text(CASE)
+    assert main(["run", str(case), "--preset", "quick", "--out", str(out), "--stages", "fe,report",
+                 "--force", "--no-progress"]) == 0
+    ran = [e["stage"] for e in read_stage_log(out)[len(read_stage_log(run)):] if e["action"] == "ran"]
+    assert ran == [s for s in STAGES if s != "mesh"]
+    a = ReducedModel.load(str(run / "fe" / "reduced_model.h5"))
+    b = ReducedModel.load(str(out / "fe" / "reduced_model.h5"))
+    for name in ("K", "M", "C", "preload_normal_force", "preload_gap", "reduced_frequencies"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+
+    def digest(p: Path) -> str:
+        return hashlib.sha256(p.read_bytes()).hexdigest()
+    # every curve was reused: the same files
+    for f in sorted((run / "dynamics").glob("*.npz")):
+        assert digest(f) == digest(out / "dynamics" / f.name), f.name
+    sa, sb = _summary(run), _summary(out)
+    ba, bb = sa.pop("backbones"), sb.pop("backbones")
+    assert json.dumps(sa, indent=1) == json.dumps(sb, indent=1)
+    from fe_joint.report.compare import differences
+    assert max((d[0] for d in differences(ba, bb)), default=0.0) <= 1e-8
+
+
 def test_level_absurdly_beyond_gross_slip_is_rejected(run: Path, tmp_path: Path, capsys) -> None:
     """levels = [1e5] (≈ 500× the gross-slip estimate): exit 2, one line naming dynamics.levels
     and the estimate; no curve computed."""
@@ -384,7 +418,9 @@ def test_backbone_files_energy_balance_and_linear_limit(run: Path) -> None:
                 assert sr.peak_amplitude == pytest.approx(br.snms_amplitude[i], rel=1e-9)
 
 
-# one level where the joint slips, one seed, no hardness variant: the pipeline twice (1 and 2
+# the small case of the rank comparison (also scripts/check_ranks.py --small): one configuration
+# (baseline; the Rq sweep's v3 fixed point on its one surface always runs, here with one pass),
+# one level where the joint slips, one seed, no hardness variant; the pipeline twice (1 and 2
 # ranks) inside the MPI phase's time
 MPI_CASE = """
 name = "e2e-mpi"
@@ -394,15 +430,22 @@ v_rq_um = 15.0
 seeds = 1
 material_hardness = 0.0
 [dynamics]
-configurations = ["baseline", "v3"]
+configurations = ["baseline"]
 levels = [15.0]
 [contact]
 kt_max_passes = 1
 """
+#: what "the same numbers on 1 and 2 ranks" means (README, "In parallel")
+RANK_F_RTOL, RANK_A_RTOL, RANK_POINTS = 1e-7, 1e-6, 0.05
 
 
 @pytest.mark.mpi
 def test_same_summary_on_one_and_two_ranks(tmp_path_factory) -> None:
+    """The small case on 1 rank (COMM_SELF on rank 0) and on 2: every FRF peak within 1e-7 in
+    frequency and 1e-6 in amplitude, continuation point counts within 5 %, the backbone within
+    the same tolerances, the contact numbers to round-off. The FE models differ by round-off
+    (K 3e-15, M 5e-13, C 7e-11 on the quick mesh: tests/test_fe_mpi.py); the peaks are roots of
+    dX/dω solved at strict tolerances, which that round-off cannot move by more."""
     from mpi4py import MPI
 
     from fe_joint.pipeline.stages import REGISTRY
@@ -422,15 +465,19 @@ def test_same_summary_on_one_and_two_ranks(tmp_path_factory) -> None:
     run_stages(case, d / "all", STAGES, REGISTRY, comm=comm, progress=False)
     if comm.rank == 0:
         a, b = _summary(d / "one"), _summary(d / "all")
-        # The FE results agree to ~1e-8 (tests/test_fe_mpi.py); a peak found by continuation with
-        # adaptive steps and polished to rtol 1e-6 in frequency agrees to the solver's precision:
-        # the amplitude is flat at a maximum, so the peak frequency is the least determined number.
-        for key in a["peaks"]:
-            assert b["peaks"][key]["peak_amplitude"] == pytest.approx(a["peaks"][key]["peak_amplitude"],
-                                                                      rel=1e-6), key
-            assert b["peaks"][key]["peak_hz"] == pytest.approx(a["peaks"][key]["peak_hz"], rel=1e-5), key
+        assert set(a["peaks"]) == set(b["peaks"]) == {"baseline@L0", "v3-rq15@L0", "check-linear@tiny"}
+        for key, p in a["peaks"].items():
+            q = b["peaks"][key]
+            assert q["peak_hz"] == pytest.approx(p["peak_hz"], rel=RANK_F_RTOL), key
+            assert q["peak_amplitude"] == pytest.approx(p["peak_amplitude"], rel=RANK_A_RTOL), key
+            assert abs(q["n_points"] - p["n_points"]) <= RANK_POINTS * max(p["n_points"], q["n_points"]), key
+        for key, p in a["backbones"].items():
+            q = b["backbones"][key]
+            assert q["points"] == p["points"], key
+            assert np.allclose(q["frequency_hz"], p["frequency_hz"], rtol=RANK_F_RTOL, atol=0), key
+            assert np.allclose(q["zeta"], p["zeta"], rtol=RANK_A_RTOL, atol=0), key
         for rq, v in a["contact_fraction"].items():
             assert b["contact_fraction"][rq] == pytest.approx(v, rel=1e-9)
         for k, v in a["k_eq_vs_rq"].items():
-            assert b["k_eq_vs_rq"][k]["kn"] == pytest.approx(v["kn"], rel=1e-6)
-        assert b["levels_N"] == pytest.approx(a["levels_N"], rel=1e-6)
+            assert b["k_eq_vs_rq"][k]["kn"] == pytest.approx(v["kn"], rel=1e-9)
+        assert b["levels_N"] == a["levels_N"]

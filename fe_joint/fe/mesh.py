@@ -89,6 +89,31 @@ def mesh_from_data(data: ResonatorMesh, comm: MPI.Comm = MPI.COMM_WORLD) -> Reso
     return ResonatorFE(mesh=mesh, cell_tags=ct, facet_tags=ft, data=data)
 
 
+def load_resonator_file(path, params: ResonatorParams, comm: MPI.Comm = MPI.COMM_WORLD) -> ResonatorFE:
+    """The resonator from a mesh the mesh stage saved (``ResonatorMesh.save``). Collective.
+
+    Rank 0 reads the file and broadcasts it, as :func:`load_resonator` does with gmsh's output:
+    the fe stage builds on the very mesh the mesh stage wrote, so rerunning it gives the same
+    bits (gmsh's high-order node placement does not, README "In parallel").
+
+    Args:
+        path: the ``.npz`` file.
+        params: the geometry the mesh was built from.
+        comm: communicator.
+    """
+    err, data = None, None
+    if comm.rank == 0:
+        try:
+            data = ResonatorMesh.load(path, params)
+        except Exception as e:  # forwarded so that the other ranks do not hang in bcast
+            err = e
+    err = comm.bcast(err, root=0)
+    if err is not None:
+        raise err
+    data = comm.bcast(data, root=0)
+    return mesh_from_data(data, comm)
+
+
 def load_resonator(params: ResonatorParams, comm: MPI.Comm = MPI.COMM_WORLD) -> ResonatorFE:
     """Build the resonator with gmsh on rank 0, broadcast it and distribute it in dolfinx.
 

@@ -20,7 +20,8 @@ from .mesh import ResonatorFE, mesh_statistics
 
 
 def write_mesh_artifacts(fe: ResonatorFE, out_dir: Path) -> dict:
-    """Write mesh.xdmf (+ .h5: mesh, cell and facet tags), pairs.csv, geometry.png, mesh.json.
+    """Write mesh.xdmf (+ .h5: mesh, cell and facet tags), pairs.csv, geometry.png, mesh.json and
+    resonator.npz (the gmsh mesh itself, which the fe stage reads).
 
     Collective (XDMF is written in parallel; csv, png and json by rank 0).
 
@@ -42,9 +43,11 @@ def write_mesh_artifacts(fe: ResonatorFE, out_dir: Path) -> dict:
         fe.mesh.topology.create_connectivity(fe.mesh.topology.dim - 1, fe.mesh.topology.dim)
         f.write_meshtags(fe.cell_tags)
         f.write_meshtags(fe.facet_tags)
-    files = ["mesh.xdmf", "mesh.h5", "pairs.csv", "geometry.png", "mesh.json"]
+    files = ["mesh.xdmf", "mesh.h5", "pairs.csv", "geometry.png", "mesh.json", "resonator.npz"]
     if comm.rank == 0:
         d = fe.data
+        # the mesh the fe stage builds on (fe.mesh.load_resonator_file)
+        d.save(out_dir / "resonator.npz")
         table = np.column_stack([np.arange(d.n_pairs), d.pair_xyz, d.pair_area, d.pair_nodes])
         np.savetxt(out_dir / "pairs.csv", table, delimiter=",",
                    fmt=["%d", "%.12g", "%.12g", "%.12g", "%.12g", "%d", "%d"],

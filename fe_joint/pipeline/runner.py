@@ -36,7 +36,8 @@ _DYNAMICS_CURVES = tuple(f"dynamics.{k}" for k in
 #: stage name → (the case inputs it reads: "section" or "section.key", code version; bump the
 #: version when a stage's output changes). A stage's key also chains the key of the stage before.
 STAGE_INPUTS: dict[str, tuple[tuple[str, ...], str]] = {
-    "mesh": (("geometry",), "1"),
+    # 2: writes mesh/resonator.npz, the mesh the fe stage reads
+    "mesh": (("geometry",), "2"),
     # preload and Craig–Bampton share the interface condensation (one factorization), so they
     # are one stage: splitting them would factorize the 60k-DOF stiffness twice
     "fe": (("geometry", "material", "preload", "reduction"), "1"),
@@ -53,7 +54,8 @@ STAGES: tuple[str, ...] = tuple(STAGE_INPUTS)
 #: files itself instead (``StageContext.files``: the dynamics stage lists its study's jobs only)
 STAGE_OUTPUTS: dict[str, tuple[str, ...]] = {
     "mesh": ("mesh",), "fe": ("fe",), "contact": ("contact",), "dynamics": ("dynamics",),
-    "speed": ("speed",), "report": ("report.md", "summary.json", "figures", "paraview"),
+    "speed": ("speed",), "report": ("report.md", "summary.json", "timings.json", "figures",
+                                    "paraview"),
 }
 #: the effective case of a run, written into its folder (``fe-joint report DIR`` reads it)
 CASE_FILE = "case.toml"

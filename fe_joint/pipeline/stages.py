@@ -40,12 +40,20 @@ def stage_mesh(ctx: StageContext) -> dict:
 
 
 def stage_fe(ctx: StageContext) -> dict:
-    """Bolt preload with smooth interface contact, free–free modes and Craig–Bampton → ReducedModel."""
-    from ..fe.reduction import build_reduced_model
+    """Bolt preload with smooth interface contact, free–free modes and Craig–Bampton → ReducedModel,
+    on the mesh the mesh stage wrote (``mesh/resonator.npz``: not meshed again, so a rerun of this
+    stage gives the same bits)."""
+    from mpi4py import MPI
+
+    from ..fe.mesh import load_resonator_file
+    from ..fe.reduction import build_reduced_model_from_fe
     c = ctx.case
-    rm = build_reduced_model(c.geometry, c.material, c.preload.bolt_force, c.reduction.damping_ratio,
-                             c.reduction.cutoff_hz, comm=ctx.comm, out_dir=str(ctx.path("fe")),
-                             n_full_elastic=c.reduction.n_check_modes + 2)
+    comm = MPI.COMM_WORLD if ctx.comm is None else ctx.comm
+    fe = load_artifact(ctx.path("mesh", "resonator.npz"),
+                       lambda p: load_resonator_file(p, c.geometry, comm))
+    rm = build_reduced_model_from_fe(fe, c.material, c.preload.bolt_force, c.reduction.damping_ratio,
+                                     c.reduction.cutoff_hz, out_dir=str(ctx.path("fe")),
+                                     n_full_elastic=c.reduction.n_check_modes + 2)
     full = np.asarray(rm.full_frequencies)
     red = np.asarray(rm.reduced_frequencies)
     fe_el = full[full > 1.0][: c.reduction.n_check_modes]
@@ -288,12 +296,13 @@ def stage_speed(ctx: StageContext) -> dict:
 
 
 def stage_report(ctx: StageContext) -> dict:
-    """Figures, report.md, summary.json from the artifacts of the earlier stages (rank 0)."""
+    """Figures, report.md, summary.json, timings.json from the artifacts of the earlier stages
+    (rank 0)."""
     from ..report import write_report
     if ctx.rank == 0:
         write_report(ctx.out, ctx.case)
         ctx.print(f"[fe-joint] report: {ctx.path('report.md')}")
-    return {"written": ["report.md", "summary.json", "figures"]}
+    return {"written": ["report.md", "summary.json", "timings.json", "figures"]}
 
 
 REGISTRY = {"mesh": stage_mesh, "fe": stage_fe, "contact": stage_contact,

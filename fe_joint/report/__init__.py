@@ -1,4 +1,4 @@
-"""The report of a run: ``report.md``, ``figures/*.png`` and ``summary.json``.
+"""The report of a run: ``report.md``, ``figures/*.png``, ``summary.json`` and ``timings.json``.
 
 Reads the artifacts of the earlier stages (rank 0 only) and draws the figures of the paper for our
 resonator: FRFs per configuration and level (paper Figs. 11, 16) and versus Rq (Fig. 21); maps of
@@ -18,16 +18,18 @@ from pathlib import Path
 from ..case import Case
 from .data import ReportData, load_report_data
 from .figures import draw_figures
+from .findings import cost_findings, findings_summary
 from .markdown import report_markdown
 from .paraview import FOLDER as PARAVIEW_FOLDER, write_interface_results
-from .summary import build_summary, write_summary
+from .summary import build_summary, build_timings, write_summary
 
-__all__ = ["ReportData", "build_summary", "load_report_data", "write_report"]
+__all__ = ["ReportData", "build_summary", "build_timings", "load_report_data", "write_report"]
 
 
 def write_report(out: Path, case: Case) -> dict:
-    """Draw the figures, write report.md, summary.json and the per-element ParaView files
-    (``paraview/<curve>.xdmf``) from a run's artifacts.
+    """Draw the figures, write report.md, summary.json, timings.json and the per-element ParaView
+    files (``paraview/<curve>.xdmf``) from a run's artifacts (summary.json holds no wall time and
+    no date: the same inputs give the same bytes).
 
     Args:
         out: the run's folder (stage manifests, fe/, contact/, dynamics/, speed/).
@@ -38,7 +40,9 @@ def write_report(out: Path, case: Case) -> dict:
     data = load_report_data(Path(out), case)
     draw_figures(data, data.out / "figures")
     write_interface_results(data, data.out / PARAVIEW_FOLDER)
-    summary = build_summary(data)
+    summary, timings = build_summary(data), build_timings(data)
+    timings["findings"] = findings_summary(cost_findings(data, summary, timings))
     write_summary(summary, data.out / "summary.json")
-    (data.out / "report.md").write_text(report_markdown(data, summary))
+    write_summary(timings, data.out / "timings.json")
+    (data.out / "report.md").write_text(report_markdown(data, summary, timings))
     return summary

@@ -71,7 +71,7 @@ def backbones_section(data: ReportData) -> dict:
             "zeta_doubled_amplitude_mm": num(br.zeta_doubled_amplitude),
             "zeta_doubled_modal_amplitude": num(br.zeta_doubled_modal),
             "snms_vs_forced": snms_rows(data, key, br),
-            "points": int(br.omega.size), "seconds": br.seconds, "complete": bool(br.complete)}
+            "points": int(br.omega.size), "complete": bool(br.complete)}
     return out
 
 
@@ -109,8 +109,11 @@ def markdown(data: ReportData, s: dict) -> list[str]:
     return L + [""]
 
 
-def cost_rows(s: dict) -> list[str]:
-    """Backbone wall times beside the forced FRFs of the same joint (cost table)."""
+def cost_rows(s: dict, t: dict) -> list[str]:
+    """Backbone wall times beside the forced FRFs of the same joint (cost table).
+
+    Args:
+        s: the summary (points per backbone); t: the timings (``summary.build_timings``)."""
     bbs = s.get("backbones") or {}
     if not bbs:
         return []
@@ -118,8 +121,8 @@ def cost_rows(s: dict) -> list[str]:
          "|---|---|---|---|"]
     for name, v in bbs.items():
         head = name + "@"
-        frf = [p["seconds"] for k, p in s["peaks"].items() if k.startswith(head)]
-        L.append(f"| {name} | {v['points']} | {v['seconds']:.1f} | {sum(frf):.1f} ({len(frf)}) |")
+        frf = [sec for k, sec in t["curves"].items() if k.startswith(head)]
+        L.append(f"| {name} | {v['points']} | {t['backbones'][name]:.1f} | {sum(frf):.1f} ({len(frf)}) |")
     return L
 
 

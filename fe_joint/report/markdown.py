@@ -131,13 +131,15 @@ def _interface_motion(s: dict) -> list[str]:
     return L + [""]
 
 
-def _v3_row(name: str, v: dict) -> str:
-    """One fixed point's row: passes, peaks (Hz), k_t,eq (N/mm³), searches, relaxations, final check."""
+def _v3_row(name: str, v: dict, seconds: list) -> str:
+    """One fixed point's row: passes, peaks (Hz), k_t,eq (N/mm³), searches and their wall times
+    (``seconds`` per pass), relaxations, final check."""
     h = v.get("history") or []
     peaks = ", ".join("%.3f" % x["peak_hz"] for x in h)
     kts = ", ".join("%.3g" % x["kt_eq"] for x in h)
-    how = ", ".join(f"{x.get('search', 'sweep')} {x.get('points', '')} pts {x.get('seconds', 0):.0f} s"
-                    for x in h)
+    secs = list(seconds) + [None] * (len(h) - len(seconds))
+    how = ", ".join(f"{x.get('search', 'sweep')} {x.get('points', '')} pts {sec or 0:.0f} s"
+                    for x, sec in zip(h, secs))
     rel = ", ".join("%.2f" % x["relaxation"] for x in h if x.get("relaxation") is not None)
     last = h[-1] if h else {}
     agree = (f"{abs(last['sweep_peak_hz'] - last['peak_hz']) / last['peak_hz']:.1e}"
@@ -145,8 +147,8 @@ def _v3_row(name: str, v: dict) -> str:
     return f"| {name} | {len(h)} | {v.get('converged')} | {peaks} | {kts} | {how} | {rel} | {agree} |"
 
 
-def _v3(s: dict) -> list[str]:
-    """The v3 fixed points, one row each."""
+def _v3(s: dict, t: dict) -> list[str]:
+    """The v3 fixed points, one row each (``t``: the timings)."""
     L = ["## v3 fixed point (k_t from the BEM loops at resonance)", "",
          "Pass 0 is v2 (a full sweep); later passes search the peak locally from the previous one "
          "(`local`, a full `sweep` if that fails), with Aitken-relaxed stiffness updates. The last "
@@ -154,16 +156,16 @@ def _v3(s: dict) -> list[str]:
          "| surface | passes | converged | peak per pass [Hz] | k_t,eq per pass [N/mm³] | search: points, s "
          "| relaxation | full FRF vs last pass |",
          "|---|---|---|---|---|---|---|---|"]
-    return L + [_v3_row(k, v) for k, v in s["v3"].items()]
+    return L + [_v3_row(k, v, t["v3"].get(k, [])) for k, v in s["v3"].items()]
 
 
-def _cost(s: dict) -> list[str]:
-    """Wall time per stage and per FRF curve, s, beside the paper's."""
+def _cost(s: dict, t: dict) -> list[str]:
+    """Wall time per stage and per FRF curve, s (from the timings ``t``), beside the paper's."""
     L = ["", "## Cost", "", "| stage | wall time [s] |", "|---|---|"]
-    L += [f"| {k} | {v:.1f} |" for k, v in s["timings_s"]["stages"].items()]
+    L += [f"| {k} | {v:.1f} |" for k, v in t["stages"].items()]
     L += ["", "| FRF curve | points | wall time [s] |", "|---|---|---|"]
-    L += [f"| {k} | {v['n_points']} | {v['seconds']:.1f} |" for k, v in s["peaks"].items()]
-    L += backbones.cost_rows(s)
+    L += [f"| {k} | {v['n_points']} | {t['curves'][k]:.1f} |" for k, v in s["peaks"].items()]
+    L += backbones.cost_rows(s, t)
     L += ["", "The paper's FORSE curves took 13 682 s (smooth, 1000 N) and 6 957 / 6 362 / 6 031 / 5 954 s "
           "(Rq 1 / 5 / 10 / 15 µm) on a 20-core node; its BEM analyses are in its Table 3."]
     return L
@@ -185,17 +187,18 @@ def _speed(speed: dict | None) -> list[str]:
     return L
 
 
-def report_markdown(data: ReportData, summary: dict) -> str:
+def report_markdown(data: ReportData, summary: dict, timings: dict) -> str:
     """The text of ``report.md``.
 
     Args:
         data: the run's artifacts (curves and surfaces for the tables).
         summary: the dict of :func:`~fe_joint.report.summary.build_summary` for the same data.
+        timings: the dict of :func:`~fe_joint.report.summary.build_timings` (the cost table).
     Returns:
         Markdown text ending in a newline; figures are linked as ``figures/<name>.png``.
     """
     head = _header(data, summary)
-    L = (head[:2] + _warnings(summary) + findings_markdown(summary["findings"]) + head[2:]
+    L = (head[:2] + _warnings(summary) + findings_markdown(summary["findings"] + timings.get("findings", [])) + head[2:]
          + parameters_markdown(data) + table1_markdown(data)
          + _levels(data, summary) + _frf_table(data, summary)
          + _damping(data, summary) + _contact(data, summary) + _contact_area(data, summary)
@@ -203,9 +206,9 @@ def report_markdown(data: ReportData, summary: dict) -> str:
          + stiffness_definitions.markdown(data, summary) + _state_figures()
          + _paper_figures(data) + paraview_markdown(data)
          + _joint_state(summary) + _interface_motion(summary)
-         + _v3(summary) + backbones.markdown(data, summary)
-         + like_for_like.markdown(data, summary) + _cost(summary) + _speed(data.speed)
-         + [""] + provenance_markdown(data, summary["provenance"]))
+         + _v3(summary, timings) + backbones.markdown(data, summary)
+         + like_for_like.markdown(data, summary) + _cost(summary, timings) + _speed(data.speed)
+         + [""] + provenance_markdown(data, timings["provenance"]))
     return "\n".join(L) + "\n"
 
 

@@ -1,4 +1,10 @@
-"""``summary.json``: the run's numbers in one JSON dict (what ``scripts/compare_summaries.py`` reads)."""
+"""``summary.json``: the run's numbers in one JSON dict (what ``scripts/compare_summaries.py`` reads),
+and ``timings.json``: its wall times.
+
+The summary holds no wall time, so the same case on the same number of ranks writes the same
+bytes (README, "In parallel"); every time — per stage, per FE part, per surface, per curve, per v3
+pass, per backbone, and the speed-against-error tables — is in ``timings.json``, which the
+report's cost table reads."""
 from __future__ import annotations
 
 import json
@@ -24,23 +30,25 @@ MESH_KEYS = ("n_nodes", "n_cells", "n_dofs", "n_pairs")
 
 
 def curve_peak(cr: CurveResult) -> dict:
-    """The peak of one FRF and its cost.
+    """The peak of one FRF.
 
     Args:
         cr: the curve.
     Returns:
         level N, peak_hz Hz, peak_amplitude mm, dissipated N·mm per cycle, n_nonlinear and
-        n_active elements, seconds s, n_points.
+        n_active elements, n_points (its wall time is in :func:`build_timings`).
     """
     return {"level": cr.level, "peak_hz": cr.peak_hz, "peak_amplitude": cr.peak_amplitude,
-            "dissipated": cr.dissipated, "n_nonlinear": cr.n_nonlinear, "seconds": cr.seconds,
+            "dissipated": cr.dissipated, "n_nonlinear": cr.n_nonlinear,
             "n_points": cr.n_points, "n_active": cr.n_active}
 
 
 def v3_section(data: ReportData) -> dict:
-    """Per v3 fixed point (keyed by its record's file stem): converged, passes, per-pass history."""
+    """Per v3 fixed point (keyed by its record's file stem): converged, passes, per-pass history
+    (without the passes' wall times: :func:`build_timings`)."""
     return {v3_job_name(rq): {"converged": r.get("converged"), "passes": len(r.get("history", [])),
-                              "history": r.get("history")}
+                              "history": None if r.get("history") is None else
+                              [{k: v for k, v in x.items() if k != "seconds"} for x in r["history"]]}
             for rq, r in sorted(data.v3_records.items())}
 
 
@@ -50,11 +58,28 @@ def run_warnings(data: ReportData) -> list[dict]:
     return [dict(w) for s in STAGES_READ for w in (data.summaries.get(s) or {}).get("warnings", [])]
 
 
-def timings(data: ReportData) -> dict:
-    """Wall times, s: per stage, the FE stage's parts and each contact surface's solves."""
+def build_timings(data: ReportData) -> dict:
+    """``timings.json``: every wall time of the run, s.
+
+    Returns:
+        {"stages": per stage, "fe": the FE stage's parts, "contact": per surface its solves,
+        "curves": per FRF curve, "v3": per fixed point the seconds of each pass, "backbones":
+        per backbone, and "speed_vs_error": the speed-against-error tables (when the run has
+        them)}.
+    """
     fe, ct = data.summaries["fe"], data.summaries["contact"]
-    return {"stages": dict(data.stage_seconds), "fe": fe.get("timings", {}),
-            "contact": {k: v.get("seconds") for k, v in ct.get("surfaces", {}).items()}}
+    out = {"stages": dict(data.stage_seconds), "fe": fe.get("timings", {}),
+           "contact": {k: v.get("seconds") for k, v in ct.get("surfaces", {}).items()},
+           "curves": {k.name: cr.seconds for k, cr in data.curves.items()},
+           "v3": {v3_job_name(rq): [x.get("seconds") for x in r.get("history") or []]
+                  for rq, r in sorted(data.v3_records.items())},
+           "backbones": {k.name: br.seconds
+                         for k, br in sorted(data.backbones.items(), key=lambda kv: kv[0].name)}}
+    if data.speed:
+        out["speed_vs_error"] = data.speed
+    # commit, versions, ranks and dates: the same inputs at another time are the same numbers
+    out["provenance"] = provenance(data)
+    return out
 
 
 def contact_areas(data: ReportData) -> dict:
@@ -117,7 +142,6 @@ def build_summary(data: ReportData) -> dict:
         "interface_motion": motions,
         "coupling_rel_error": ct.get("coupling_rel_error"),
         "linear_peak_rel_error": dyn.get("linear_peak_rel_error"),
-        "timings_s": timings(data),
     }
     if data.seeds:
         summary["seeds"] = seed_statistics(data)
@@ -128,15 +152,13 @@ def build_summary(data: ReportData) -> dict:
     summary["like_for_like"] = like_for_like.section(data)
     summary["warnings"] += like_for_like.warnings(summary)
     summary["stiffness_definitions"] = stiffness_definitions_section(data)
-    if data.speed:
-        summary["speed_vs_error"] = data.speed
-    summary["provenance"] = provenance(data)
     # last: the findings read the numbers above
     summary["findings"] = findings_summary(findings(data, summary))
     return summary
 
 
 def write_summary(summary: dict, path: Path) -> Path:
-    """Write ``summary`` as indented JSON (numpy scalars as floats); returns ``path``."""
+    """Write ``summary`` (or the timings) as indented JSON (numpy scalars as floats); returns
+    ``path``."""
     Path(path).write_text(json.dumps(summary, indent=1, default=float))
     return Path(path)

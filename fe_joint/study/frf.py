@@ -375,8 +375,14 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, iterations: int = 8):
     the Newton step ω ← ω − h·ω·(X₊ − X₋) / (2(X₊ − 2X₀ + X₋)) on the central-difference
     derivative. Its fixed point, X(ω(1+h)) = X(ω(1−h)), depends on the peak alone: with
     h = 1e-5 it lies within about h²·X‴/(6X″) (≈ 1e-8 relative for ζ ≥ 1e-3) of the true
-    maximum, and a solver noise ε moves it by only ≈ ε/(h·ω²X″/X) (≈ 1e-11 for ε = 1e-11).
-    h shrinks from 1e-4 to 1e-5 with the step, so a start far from the peak still converges.
+    maximum; the strict solves' noise (≈ 1e-8 relative in X on the resonator) makes the last
+    steps wander by ≈ 1.5e-8 relative. h shrinks from 1e-4 to 1e-5 with the step, so a start
+    far from the peak still converges.
+
+    A strict solve that fails is repeated at the sweep's tolerances: it used to end the
+    refinement and return the start, the polished point, which depends on the path (one e2e peak
+    was 1.9e-5 off in one run of two). Where the stencil is not concave (a corner of the sampled
+    friction law) the best of its three points is kept.
 
     Args:
         hb: the HarmonicBalance of the curve (its tolerances are restored on return).
@@ -386,18 +392,29 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, iterations: int = 8):
         iterations: Newton iterations at most.
 
     Returns:
-        the Solution at the refined peak (the best stencil point if the stencil is not concave,
-        e.g. at a corner of the sampled friction law; ``sol`` if a strict solve fails).
+        the Solution at the refined peak (the best stencil point where the stencil is not
+        concave; the last iterate, or ``sol``, if a solve fails at both tolerances).
     """
-    saved = hb.tol, hb.krylov_tol
+    fast = hb.tol, hb.krylov_tol
     hb.tol, hb.krylov_tol = SWEEP_TOLERANCES[1]
+    best = sol
+
+    def solve(w: float, guess):
+        try:
+            return hb.solve(w, force, guess=guess)
+        except ConvergenceError:
+            hb.tol, hb.krylov_tol = fast
+            try:
+                return hb.solve(w, force, guess=guess)
+            finally:
+                hb.tol, hb.krylov_tol = SWEEP_TOLERANCES[1]
     try:
         w = float(sol.omega)
-        best = hb.solve(w, force, guess=sol)
+        best = solve(w, sol)
         h = PEAK_STENCIL[0]
         for _ in range(iterations):
-            lo = hb.solve(w * (1 - h), force, guess=best)
-            hi = hb.solve(w * (1 + h), force, guess=best)
+            lo = solve(w * (1 - h), best)
+            hi = solve(w * (1 + h), best)
             x0, xl, xh = best.amplitude(dof), lo.amplitude(dof), hi.amplitude(dof)
             curv = xh - 2 * x0 + xl
             if not curv < 0:         # not concave at this scale: keep the best of the three
@@ -406,12 +423,12 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, iterations: int = 8):
             # a Newton step beyond the stencil is trusted only up to twice its width
             step = float(np.clip(-0.5 * h * w * (xh - xl) / curv, -2 * h * w, 2 * h * w))
             w += step
-            best = hb.solve(w, force, guess=hi if step > 0 else lo)
+            best = solve(w, hi if step > 0 else lo)
             if abs(step) <= PEAK_FTOL * w:
                 break
             h = float(np.clip(abs(step) / w, PEAK_STENCIL[1], PEAK_STENCIL[0]))
-        return best
     except ConvergenceError:
-        return sol
+        pass
     finally:
-        hb.tol, hb.krylov_tol = saved
+        hb.tol, hb.krylov_tol = fast
+    return best
