@@ -160,3 +160,23 @@ def test_refined_peak_does_not_depend_on_a_failed_strict_solve(monkeypatch) -> N
     assert got.peak_amplitude == pytest.approx(ref.peak_amplitude, rel=1e-8)
     assert abs(polished["f"] - ref.peak_hz) > 100 * abs(got.peak_hz - ref.peak_hz)
     assert calls["failed"] >= 3
+
+
+def test_speed_tables_measure_the_frf_peak() -> None:
+    """The harmonics/samples speed-against-error rows are the FRF peak (a short sweep through it,
+    speed_error.PEAK_BAND), not a cold-start solve at the peak frequency (which landed on the lower
+    branch of the resonator's fold): at the study's own H and n_t the row equals the full sweep's
+    polished peak (measured 6e-9 in f, 2e-8 in amplitude); the last row is the reference (0 error)."""
+    from fe_joint.study.speed_error import hbm_knobs
+    rm, joint, level = _two_grounded_masses(), _joint(2e4), 5.0
+    cr, _ = _sweep(rm, joint, level)
+    t = hbm_knobs(rm, joint, level, SETTINGS, cr.peak_hz, harmonics=(1, 3), samples=(16, 32),
+                  h_fixed=1)
+    rows = t["AFT samples (baseline, middle level, FRF peak by a sweep through it)"]
+    same = rows[-1]                                   # H = 1, 32 samples: the sweep's settings
+    assert (same["harmonics"], same["samples"]) == (1, 32)
+    assert abs(same["peak [Hz]"] / cr.peak_hz - 1) <= 1e-7
+    assert abs(same["amplitude [µm]"] / (1e3 * cr.peak_amplitude) - 1) <= 1e-6
+    assert same["f error vs finest [%]"] == 0.0 and rows[0]["amplitude error vs finest [%]"] > 0
+    hr = t["harmonics (baseline, middle level, FRF peak by a sweep through it)"]
+    assert [r["harmonics"] for r in hr] == [1, 3] and all(r["points"] > 10 for r in hr)

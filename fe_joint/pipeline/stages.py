@@ -285,8 +285,8 @@ def stage_speed(ctx: StageContext) -> dict:
             setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
             joint = joint_baseline(setup, c.contact.k_ref)
             hs = (1, 3, 5) if c.dynamics.harmonics <= 3 else (1, 3, 5, 7)
-            tables.update(speed_error.hbm_knobs(rm, joint, cr.level, c.contact.mu,
-                                                2 * np.pi * cr.peak_hz, harmonics=hs))
+            tables.update(speed_error.hbm_knobs(rm, joint, cr.level, SweepSettings.from_case(c),
+                                                cr.peak_hz, harmonics=hs))
     if ctx.rank == 0:
         ctx.path("speed").mkdir(parents=True, exist_ok=True)
         tmp = ctx.path("speed", "speed_error.json.tmp")

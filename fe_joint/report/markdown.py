@@ -179,10 +179,11 @@ def _speed(speed: dict | None) -> list[str]:
     for title, rows in speed.items():
         if not rows:
             continue
-        keys = list(rows[0])
+        keys = list(dict.fromkeys(k for r in rows for k in r))    # a row may add a note
         L += [f"### {title}", "", "| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
         for r in rows:
-            L.append("| " + " | ".join(_fmt(r[k]) if isinstance(r[k], float) else str(r[k]) for k in keys) + " |")
+            L.append("| " + " | ".join(_fmt(r[k]) if isinstance(r.get(k), float) else str(r.get(k, ""))
+                                       for k in keys) + " |")
         L.append("")
     return L
 
