@@ -422,19 +422,17 @@ def test_backbone_files_energy_balance_and_linear_limit(run: Path) -> None:
 # (baseline; the Rq sweep's v3 fixed point on its one surface always runs, here with one pass),
 # one level where the joint slips, one seed, no hardness variant; the pipeline twice (1 and 2
 # ranks) inside the MPI phase's time
-MPI_CASE = """
-name = "e2e-mpi"
-[roughness]
-rq_um = [15.0]
-v_rq_um = 15.0
-seeds = 1
-material_hardness = 0.0
-[dynamics]
-configurations = ["baseline"]
-levels = [15.0]
-[contact]
-kt_max_passes = 1
-"""
+def _small_case() -> str:
+    """scripts/check_ranks.py's small case (one source of it)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        "check_ranks", Path(__file__).resolve().parents[1] / "scripts" / "check_ranks.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.SMALL_CASE
+
+
+MPI_CASE = _small_case()
 #: what "the same numbers on 1 and 2 ranks" means (README, "In parallel")
 RANK_F_RTOL, RANK_A_RTOL, RANK_POINTS = 1e-7, 1e-6, 0.05
 

@@ -101,17 +101,7 @@ def load_resonator_file(path, params: ResonatorParams, comm: MPI.Comm = MPI.COMM
         params: the geometry the mesh was built from.
         comm: communicator.
     """
-    err, data = None, None
-    if comm.rank == 0:
-        try:
-            data = ResonatorMesh.load(path, params)
-        except Exception as e:  # forwarded so that the other ranks do not hang in bcast
-            err = e
-    err = comm.bcast(err, root=0)
-    if err is not None:
-        raise err
-    data = comm.bcast(data, root=0)
-    return mesh_from_data(data, comm)
+    return mesh_from_data(_on_rank0(lambda: ResonatorMesh.load(path, params), comm), comm)
 
 
 def load_resonator(params: ResonatorParams, comm: MPI.Comm = MPI.COMM_WORLD) -> ResonatorFE:
@@ -127,17 +117,22 @@ def load_resonator(params: ResonatorParams, comm: MPI.Comm = MPI.COMM_WORLD) -> 
         The :class:`ResonatorFE` (``data`` identical on every rank).
     """
     params.validate()  # every rank raises the same error; nobody waits on a failed rank 0
+    return mesh_from_data(_on_rank0(lambda: build_resonator(params), comm), comm)
+
+
+def _on_rank0(make, comm: MPI.Comm):
+    """``make()`` on rank 0, its result broadcast; its exception raised on every rank (forwarded,
+    so that the other ranks do not hang in bcast). Collective."""
     err, data = None, None
     if comm.rank == 0:
         try:
-            data = build_resonator(params)
-        except Exception as e:  # forwarded so that the other ranks do not hang in bcast
+            data = make()
+        except Exception as e:
             err = e
     err = comm.bcast(err, root=0)
     if err is not None:
         raise err
-    data = comm.bcast(data, root=0)
-    return mesh_from_data(data, comm)
+    return comm.bcast(data, root=0)
 
 
 def _node_to_block(V: dolfinx.fem.FunctionSpace) -> np.ndarray:
