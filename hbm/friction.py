@@ -51,6 +51,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from . import friction_jit
 from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 
@@ -59,6 +60,8 @@ STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OPEN, OPEN = 0, 1, 2, 3, 4
 GROSS_SLIP_FRACTION = 0.9
 #: up to this many marched elements the forward march runs on Python scalars (less overhead)
 SCALAR_LIMIT = 4
+#: march with the compiled kernels of hbm.friction_jit when numba is there (else numpy)
+USE_JIT = True
 #: |det(I - A_cycle)| below which the slider fixed point is treated as neutral (plain iteration)
 NEWTON_DET = 1e-6
 #: cycle budget of the plain-repetition redo of neutral elements, × max_cycles
@@ -848,6 +851,17 @@ def _cycle_vector(tab: _StepTables, rows: np.ndarray, w: np.ndarray) -> _Record:
     return rec
 
 
+def _cycle_jit(tab: _StepTables, rows: np.ndarray, w: np.ndarray) -> _Record:
+    """_cycle_vector compiled (:mod:`hbm.friction_jit`): the scalar path's algorithm, one
+    element at a time at machine speed."""
+    rec = _Record(rows.size, tab.ut.shape[1])
+    rec.cdone[:] = False
+    friction_jit.cycle(rows, w, tab.kt, tab.ut, tab.tcl, tab.L, tab.al, tab.be, tab.pe, tab.Lpe,
+                       tab.bad, tab.tlo, tab.ct, tab.Nc, tab.Lc, rec.code, rec.wst, rec.slip,
+                       rec.mode0, rec.AP, rec.AQ, rec.evc, rec.evt, rec.wend)
+    return rec
+
+
 def _cycle_matrix(tab: _StepTables, rows, rec: _Record) -> np.ndarray:
     """(k, 2, 2) derivative of the end slider w.r.t. the start one for the records rec of the
     elements rows of tab (see _Record.cP): from the steps' (AP, AQ) (switching steps: recorded by
@@ -1403,9 +1417,11 @@ class FrictionContacts:
                              cyc=np.zeros(k, dtype=int), dev=np.zeros(k), prev=np.zeros(k),
                              jumped=np.zeros(k, dtype=bool))
         rows, w, cycle = np.arange(k), np.zeros(k, dtype=complex), 0
-        while rows.size > SCALAR_LIMIT and cycle < max_cycles:
+        jit = USE_JIT and friction_jit.AVAILABLE
+        march_one = _cycle_jit if jit else _cycle_vector
+        while rows.size > (0 if jit else SCALAR_LIMIT) and cycle < max_cycles:
             cycle += 1
-            rows, w = self._after_cycle(st, cycle, rows, w, _cycle_vector(tab, rows, w))
+            rows, w = self._after_cycle(st, cycle, rows, w, march_one(tab, rows, w))
             if not newton:
                 _give_up_if_slow(st, rows, cycle, max_cycles)
         for i in range(rows.size):

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import hbm.friction as friction
+import hbm.friction_jit as friction_jit
 from hbm import FrictionContacts
 from hbm.fourier import Fourier
 from hbm.reference import circular_orbit_force, coulomb_element_reference, elliptic_orbits_with_separation
@@ -142,11 +143,24 @@ def fd_jacobian(c, U, f, eps):
     return DF, J
 
 
-@pytest.mark.parametrize("scalar", [True, False])
-def test_jacobian_vs_finite_differences(scalar, monkeypatch):
-    """Separating ellipses: the analytic Jacobian against central differences, for the
-    few-element march on Python scalars and the vectorized one."""
-    monkeypatch.setattr(friction, "SCALAR_LIMIT", 4 if scalar else 0)
+#: the three implementations of the forward march: numpy on Python scalars (few elements),
+#: numpy vectorized over elements, compiled (hbm.friction_jit, the default where numba is)
+PATHS = ("scalar", "vector", "jit")
+
+
+def use_path(path: str, monkeypatch) -> None:
+    """Make FrictionContacts march with ``path`` (one of PATHS)."""
+    if path == "jit":
+        assert friction_jit.AVAILABLE, "numba missing: scripts/setup installs python3-numba"
+    monkeypatch.setattr(friction, "USE_JIT", path == "jit")
+    monkeypatch.setattr(friction, "SCALAR_LIMIT", 10**6 if path == "scalar" else 0)
+
+
+@pytest.mark.parametrize("path", PATHS)
+def test_jacobian_vs_finite_differences(path, monkeypatch):
+    """Separating ellipses: the analytic Jacobian against central differences, for each of the
+    forward marches."""
+    use_path(path, monkeypatch)
     U, f = ellipses()[0:3], Fourier(2, 64)
     c = contacts(3)
     DF, Jp = fd_jacobian(c, U, f, 1e-7)
@@ -154,12 +168,13 @@ def test_jacobian_vs_finite_differences(scalar, monkeypatch):
     assert np.abs(DF - 0.5 * (Jp + Jm)).max() <= 1e-8 * np.abs(DF).max()      # measured 4e-11
 
 
+@pytest.mark.parametrize("path", ["vector", "jit"])
 @pytest.mark.parametrize("case", ["chains", "reclosing"])
-def test_jacobian_through_switch_chains_and_reclosings(case, monkeypatch):
+def test_jacobian_through_switch_chains_and_reclosings(case, path, monkeypatch):
     """Coarse sampling: several switches in one step, contacts reopening between two closed
     samples. The maps are smooth but strongly curved there (a contact barely reopening), so the
     check is that the one-sided finite-difference error vanishes in proportion to eps."""
-    monkeypatch.setattr(friction, "SCALAR_LIMIT", 0)
+    use_path(path, monkeypatch)
     if case == "chains":
         U, f = switch_chains(), Fourier(3, 16)
     else:
@@ -278,3 +293,39 @@ def test_redo_gives_up_when_contraction_predicts_no_closure():
     # before GIVE_UP_AFTER periods the rate is not trusted (transients)
     st.prev = np.array([2e-3, 1.001e-3])
     friction._give_up_if_slow(st, rows, friction.GIVE_UP_AFTER - 1, 1000)
+
+
+def test_compiled_march_equals_the_numpy_marches(monkeypatch):
+    """The compiled march (hbm.friction_jit) takes the same steps as the numpy ones: the same
+    step codes and switch sequences, sliders and forces to rounding, the same Jacobian, on
+    switch chains (n_t = 16), reclosings inside a step and separating ellipses."""
+    sets = [(switch_chains(), Fourier(3, 16)), (reclosing(Fourier(3, 7)), Fourier(3, 7)),
+            (ellipses(), Fourier(2, 64))]
+    for U, f in sets:
+        c = contacts(len(U))
+        out = {}
+        for path in PATHS:
+            use_path(path, monkeypatch)
+            tab, rec = marched(c, U, f)
+            out[path] = (rec, c.evaluate(U, f, True))
+        ref_rec, (F0, nl0, J0) = out["vector"]
+        for path in ("scalar", "jit"):
+            rec, (F, nl, J) = out[path]
+            assert np.array_equal(rec.code, ref_rec.code) and np.array_equal(rec.evc, ref_rec.evc), path
+            assert np.abs(rec.wend - ref_rec.wend).max() <= 1e-12 * np.abs(ref_rec.wend).max(), path
+            assert np.array_equal(nl, nl0), path
+            assert np.abs(F - F0).max() <= 1e-12 * np.abs(F0).max(), path
+            assert np.abs(J - J0).max() <= 1e-10 * np.abs(J0).max(), path
+
+
+def test_compiled_march_constants_are_the_friction_modules():
+    """friction_jit repeats friction's tolerances and codes as literals (numba freezes globals):
+    they must be the same values."""
+    names = ("SLIP_TOL", "EDGE_TOL", "PEAK_TOL", "PEAK_GRID", "MAX_SWITCH", "ROOT_TOL", "ROOT_ITER",
+             "ROOT_NEWTON", "STICK_STEP", "SLIP_STEP", "OPEN_STEP", "EVENT_STEP", "M_STICK", "M_SLIP",
+             "M_OPEN", "SW_OPEN_STICK", "SW_OPEN_SLIP", "SW_STICK_SLIP", "SW_STICK_SLIP_AT",
+             "SW_SLIP_STICK", "SW_SLIP_STICK_AT")
+    for n in names:
+        assert getattr(friction_jit, n) == getattr(friction, n), n
+    assert (friction_jit.GAUSS0, friction_jit.GAUSS1) == friction._GAUSS
+    assert np.array_equal(friction_jit.BERN, friction._BERN)

@@ -147,7 +147,7 @@ def fd_check(c, U, f, eps=1e-7):
     return nl, DF, J
 
 
-@pytest.mark.parametrize("n_copies", [1, 3])           # 6 elements: scalar march, 18: vectorized
+@pytest.mark.parametrize("n_copies", [1, 3])   # 6, 18 elements (numpy march: scalar, vectorized; test_hbm_aft2d compares the marches)
 def test_jacobian_vs_finite_differences_all_regimes(n_copies):
     H, nt = 3, 64
     f = Fourier(H, nt)

@@ -94,8 +94,8 @@ def rotated(X: np.ndarray, phi: float) -> np.ndarray:
 
 
 def one_element(kt: float, kn: float, mu: float, n0: float, copies: int = 1) -> FrictionContacts:
-    """One element against ground (DOFs 0, 1, 2); ``copies`` > 4 identical ones take the
-    vectorized march instead of the scalar one."""
+    """One element against ground (DOFs 0, 1, 2); ``copies`` > 4 identical ones take numpy's
+    vectorized march instead of the scalar one when the compiled march is off."""
     return FrictionContacts(np.array([[[0, 1, 2], [-1, -1, -1]]] * copies), kt=kt, kn=kn, mu=mu,
                             n0=n0)
 
