@@ -16,7 +16,10 @@ Magnus/Möbius slip steps, switches located inside the steps). Prints markdown t
 2. Cost per evaluation (min of interleaved repeats): synthetic joint of 300 elements (random 2D
    orbits, normal oscillation, n0 in [1, 20] N; H = 3, n_t = 128), and one element (1D, 2D).
 
-Usage: OMP_NUM_THREADS=1 python scripts/bench_aft2d.py [--old REV] [--repeat 5] [--quick]
+3. With ``--march`` (only): the working tree's numpy march against its compiled one
+   (hbm.friction_jit), same cases as 2.
+
+Usage: OMP_NUM_THREADS=1 python scripts/bench_aft2d.py [--old REV] [--repeat 5] [--quick] [--march]
 
 Measured here (shared 2-core machine, old vs new in the same run, --repeat 7; the cost ratios
 drifted between 2.0 and 2.4 (F) and 1.6 and 2.2 (F + J) over four runs with the machine's load):
@@ -199,12 +202,48 @@ def cost_rows(mods, names, repeat: int):
     return out
 
 
+def march_rows(repeat: int):
+    """(case, {(march, jacobian): seconds}): the working tree's numpy march against its compiled
+    one (hbm.friction_jit), interleaved repeats (min)."""
+    import hbm.friction as fr
+    f = Fourier(3, 128)
+    cases = [("300 elements, H = 3, n_t = 128", synthetic, {}),
+             ("1 element, 2D slip", one_element, {"twod": True})]
+    out = []
+    for label, make, kw in cases:
+        c, U = make(hbm, **kw)
+        n = 1 if make is synthetic else 20
+        best = {}
+        for _ in range(repeat):
+            for jit in (False, True):
+                fr.USE_JIT = jit
+                for jac in (False, True):
+                    c.evaluate(U, f, jac)
+                    t = time.perf_counter()
+                    for _ in range(n):
+                        c.evaluate(U, f, jac)
+                    best[jit, jac] = min(best.get((jit, jac), np.inf), (time.perf_counter() - t) / n)
+        fr.USE_JIT = True
+        out.append((label, best))
+    return out
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--old", default="38d152c", help="git revision of the old friction.py")
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--quick", action="store_true", help="n_t up to 256, 2 repeats")
+    ap.add_argument("--march", action="store_true",
+                    help="only the cost of the numpy march against the compiled one")
     a = ap.parse_args(argv)
+    if a.march:
+        print("| evaluate (ms) | numpy F | numpy F + J | compiled F | compiled F + J | numpy/compiled F | numpy/compiled F + J |")
+        print("|---|---|---|---|---|---|---|")
+        for label, b in march_rows(2 if a.quick else a.repeat):
+            print(f"| {label} | {b[False, False] * 1e3:.2f} | {b[False, True] * 1e3:.2f} | "
+                  f"{b[True, False] * 1e3:.2f} | {b[True, True] * 1e3:.2f} | "
+                  f"{b[False, False] / b[True, False]:.1f} | {b[False, True] / b[True, True]:.1f} |")
+        return
     nts = NTS[:-1] if a.quick else NTS
     old = load_old(a.old)
     mods, names = ([old, hbm] if old else [hbm]), (["old", "new"] if old else ["new"])

@@ -180,3 +180,28 @@ def test_speed_tables_measure_the_frf_peak() -> None:
     assert same["f error vs finest [%]"] == 0.0 and rows[0]["amplitude error vs finest [%]"] > 0
     hr = t["harmonics (baseline, middle level, FRF peak by a sweep through it)"]
     assert [r["harmonics"] for r in hr] == [1, 3] and all(r["points"] > 10 for r in hr)
+
+
+def test_element_count_rows_are_the_models_own_peaks() -> None:
+    """The element-count table (speed_error.mesh_rows): each row is its model's own FRF peak, found
+    by a sweep centred by the model's stuck frequency; the last row (the case's mesh) is the
+    reference. Here the 'coarse' model is the same structure with a 4 % stiffer joint (its stuck
+    frequency and peak move): its row equals that joint's full-sweep peak, its stuck frequency
+    error is the stuck modes' own difference, and the reference row has zero errors."""
+    from fe_joint.study.speed_error import mesh_rows
+    rm = _two_grounded_masses()
+    rm.n_pairs, rm.n_dofs, rm.preload_status = 1, 6, np.array([1])
+    level = 5.0
+    case_joint, coarse_joint = _joint(2e4), _joint(2e4 * 1.04)
+    ref, _ = _sweep(rm, case_joint, level)
+    coarse, _ = _sweep(rm, coarse_joint, level)
+    rows = mesh_rows([(4.0, rm, 1.0, coarse_joint), (2.8, rm, 2.0, case_joint)], level, SETTINGS,
+                     ref.peak_hz)
+    assert [r["lap mesh [mm]"] for r in rows] == [4.0, 2.8] and rows[0]["elements"] == 1
+    for r, cr in zip(rows, (coarse, ref)):
+        assert abs(r["peak [Hz]"] / cr.peak_hz - 1) <= 1e-7
+        assert abs(r["amplitude [µm]"] / (1e3 * cr.peak_amplitude) - 1) <= 1e-6
+    f = [stuck_modes(rm.K, rm.M, rm.pair_dofs, j).frequency for j in (coarse_joint, case_joint)]
+    assert rows[0]["stuck error vs case mesh [%]"] == pytest.approx(100 * abs(f[0] - f[1]) / f[1], rel=1e-12)
+    assert rows[0]["stuck error vs case mesh [%]"] > 0.01
+    assert rows[1]["f error vs case mesh [%]"] == 0.0 and rows[1]["stuck error vs case mesh [%]"] == 0.0

@@ -44,7 +44,7 @@ STAGE_INPUTS: dict[str, tuple[tuple[str, ...], str]] = {
     # the BEM grid spans the overlap (geometry) and uses the elastic constants (material)
     "contact": (("geometry", "material", "roughness"), "3"),
     "dynamics": (("geometry", "material", "roughness", "contact") + _DYNAMICS_CURVES, "8"),
-    "speed": (("geometry", "material", "roughness", "contact", "dynamics"), "2"),
+    "speed": (("geometry", "material", "roughness", "contact", "dynamics"), "3"),
     # the report reads every section (titles, tables, the paper comparison)
     "report": (("geometry", "material", "preload", "reduction", "roughness", "contact",
                 "dynamics"), "3"),

@@ -263,6 +263,26 @@ def stage_dynamics(ctx: StageContext) -> dict:
     return summary
 
 
+def _coarser_models(c) -> list:
+    """Reduced models of the case at the coarser lap meshes of the element-count table, built on
+    this rank alone: [(lap mesh size mm, ReducedModel, seconds)]."""
+    import dataclasses
+
+    from mpi4py import MPI
+
+    from ..fe.mesh import load_resonator
+    from ..fe.reduction import build_reduced_model_from_fe
+    from ..study import speed_error
+    out = []
+    for size in speed_error.lap_mesh_sizes(c.geometry.lap_mesh_size):
+        t0 = time.perf_counter()
+        fe = load_resonator(dataclasses.replace(c.geometry, lap_mesh_size=size), MPI.COMM_SELF)
+        rm = build_reduced_model_from_fe(fe, c.material, c.preload.bolt_force, c.reduction.damping_ratio,
+                                         c.reduction.cutoff_hz, n_full_elastic=0)
+        out.append((size, rm, time.perf_counter() - t0))
+    return out
+
+
 def stage_speed(ctx: StageContext) -> dict:
     """Speed against error: BEM grid, HBM harmonics and samples (skipped unless dynamics.speed_study).
 
@@ -287,6 +307,14 @@ def stage_speed(ctx: StageContext) -> dict:
             hs = (1, 3, 5) if c.dynamics.harmonics <= 3 else (1, 3, 5, 7)
             tables.update(speed_error.hbm_knobs(rm, joint, cr.level, SweepSettings.from_case(c),
                                                 cr.peak_hz, harmonics=hs))
+            fe_s = float(((ctx.summaries.get("fe") or {}).get("timings") or {}).get("total_s", float("nan")))
+            models = []
+            for size, rm_s, sec in _coarser_models(c) + [(c.geometry.lap_mesh_size, rm, fe_s)]:
+                su = ms.interface_setup(rm_s, c.geometry, c.material, c.roughness)
+                models.append((size, rm_s, sec, joint_baseline(su, c.contact.k_ref)))
+            tables["interface elements (lap mesh size; baseline, middle level, FRF peak by a sweep "
+                   "through it; the coarser meshes' FE on one rank)"] = speed_error.mesh_rows(
+                models, cr.level, SweepSettings.from_case(c), cr.peak_hz)
     if ctx.rank == 0:
         ctx.path("speed").mkdir(parents=True, exist_ok=True)
         tmp = ctx.path("speed", "speed_error.json.tmp")
