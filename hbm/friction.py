@@ -42,7 +42,8 @@ sample are recognized by a vectorized test and never marched: stuck elements are
 the exact derivative of the computed map: each step's derivative (hand-coded for the common
 full-step slip, forward-mode replay of the recorded switches for the rare switching steps, with
 the switch times differentiated implicitly) is propagated through the closed cycle, and through
-the cycles before closure for elements whose cycle map is neutral.
+the cycles before closure for elements whose cycle map is neutral. With numba, the march and these
+step derivatives and their propagation run compiled (hbm.friction_jit, same formulas).
 """
 from __future__ import annotations
 
@@ -62,6 +63,9 @@ GROSS_SLIP_FRACTION = 0.9
 SCALAR_LIMIT = 4
 #: march with the compiled kernels of hbm.friction_jit when numba is there (else numpy)
 USE_JIT = True
+#: ... and differentiate it with them too (else the numpy Jacobian; tests and
+#: scripts/bench_aft2d.py compare the two)
+JIT_JACOBIAN = True
 #: |det(I - A_cycle)| below which the slider fixed point is treated as neutral (plain iteration)
 NEWTON_DET = 1e-6
 #: cycle budget of the plain-repetition redo of neutral elements, × max_cycles
@@ -1590,32 +1594,64 @@ def _march_jacobian(tab: _StepTables, final: _Record, hist, cyc, fourier: Fourie
     dw_j = Phi_j dw_0 + d_j. The start value is that of the periodic state,
     dw_0 = (I - Phi_nt)^-1 d_nt (implicit derivative of the fixed point w = Phi(w)); for neutral
     elements (det(I - Phi_nt) ~ 0) it is the plain propagation of the history from rest.
+    Compiled (hbm.friction_jit) when the march is, else in numpy.
     """
     k, nt = final.code.shape
     nH, E = fourier.nH, fourier.E
     nx = 3 * nH
-    A, G = _local_jacobians(tab, final)
-    SE = _sources(G, E, final.code)
-    active = np.nonzero((final.code != STICK_STEP).any(axis=0))[0]      # samples where dw may change
-    Ps, Ds = _propagate(A, SE, active, np.zeros((k, 2, nx)))
+    jit = _jit_jacobian()
+    if jit:
+        Ps, Ds = _sensitivities_jit(tab, np.arange(k), final, E, True)    # after every step
+        D_end = Ds[:, :, -1]
+    else:
+        A, G = _local_jacobians(tab, final)
+        SE = _sources(G, E, final.code)
+        active = np.nonzero((final.code != STICK_STEP).any(axis=0))[0]  # samples where dw may change
+        Ps, Ds = _propagate(A, SE, active, np.zeros((k, 2, nx)))
+        D_end = Ds[:, -1]
     Mfix = np.eye(2) - Ps[:, -1]
     det = Mfix[:, 0, 0] * Mfix[:, 1, 1] - Mfix[:, 0, 1] * Mfix[:, 1, 0]
     fixed = np.abs(det) > NEWTON_DET
     dw0 = np.zeros((k, 2, nx))
     if fixed.any():
-        dw0[fixed] = np.linalg.solve(Mfix[fixed], Ds[fixed, -1])
+        dw0[fixed] = np.linalg.solve(Mfix[fixed], D_end[fixed])
     neutral = np.nonzero(~fixed)[0]
     if neutral.size:
         dw0[neutral] = _neutral_history(tab, hist, cyc, neutral, E)
+    dN = np.zeros((k, nt, 3, nH))
+    dN[:, :, 2] = (tab.kn[:, None] * tab.closed)[..., None] * E[None]
+    if jit:
+        friction_jit.force_sensitivities(tab.kt, Ps, dw0, E, Ds)         # dT, in place of Ds
+        return Ds, dN.reshape(k, nt, nx)
     # dw after step j = after the active steps up to and including j
     which = np.searchsorted(active, np.arange(nt), side="right")
     dws = Ps[:, which] @ dw0[:, None] + Ds[:, which]                     # (k, nt, 2, nx)
     Et = np.zeros((nt, 2, nx))
     Et[:, 0, 0:nH], Et[:, 1, nH:2 * nH] = E, E
     dT = (tab.kt[:, None, None, None] * (Et[None] - dws)).transpose(0, 2, 1, 3)
-    dN = np.zeros((k, nt, 3, nH))
-    dN[:, :, 2] = (tab.kn[:, None] * tab.closed)[..., None] * E[None]
     return dT, dN.reshape(k, nt, nx)
+
+
+def _jit_jacobian() -> bool:
+    """Differentiate the march with the compiled kernels (see JIT_JACOBIAN)."""
+    return USE_JIT and JIT_JACOBIAN and friction_jit.AVAILABLE
+
+
+def _sensitivities_jit(tab: _StepTables, g: np.ndarray, rec: _Record, E: np.ndarray,
+                      full: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Slider sensitivities of the recorded periods rec (row i: step tables row g[i]), compiled.
+
+    Returns:
+        Ps (b, m, 2, 2), Ds (b, 2, m, 3 nH) with dw = Ps dw_0 + Ds (mm per mm of harmonic) after
+        every step (m = nt, full) or after the period (m = 1); Ds is laid out as the force
+        sensitivities, which friction_jit.force_sensitivities writes over it.
+    """
+    b, nt = rec.code.shape
+    m = nt if full else 1
+    Ps, Ds = np.empty((b, m, 2, 2)), np.empty((b, 2, m, 3 * E.shape[1]))
+    friction_jit.sensitivities(g, tab.kt, tab.mu, tab.kn, tab.ut, tab.L, tab.Lg, tab.pg, tab.ct,
+                               tab.Nc, rec.code, rec.wst, rec.mode0, rec.evc, rec.evt, E, full, Ps, Ds)
+    return Ps, Ds
 
 
 def _neutral_history(tab: _StepTables, hist, cyc, neutral, E):
@@ -1636,10 +1672,15 @@ def _neutral_history(tab: _StepTables, hist, cyc, neutral, E):
         return dwh
     rec = _Record(sum(x.size for x in rows), E.shape[0])
     rec.put(slice(None), _concat_records(recs))
-    A, G = _local_jacobians(tab.take(np.concatenate(rows)), rec)
-    act = np.nonzero((rec.code != STICK_STEP).any(axis=0))[0]
-    Ps, Ds = _propagate(A, _sources(G, E, rec.code), act, np.zeros((A.shape[0], 2, dwh.shape[2])))
-    P, D = Ps[:, -1], Ds[:, -1]                     # each recorded cycle: dw -> P dw + D
+    if _jit_jacobian():
+        Ps, Ds = _sensitivities_jit(tab, np.concatenate(rows), rec, E, False)
+        D = Ds[:, :, -1]
+    else:
+        A, G = _local_jacobians(tab.take(np.concatenate(rows)), rec)
+        act = np.nonzero((rec.code != STICK_STEP).any(axis=0))[0]
+        Ps, Ds = _propagate(A, _sources(G, E, rec.code), act, np.zeros((A.shape[0], 2, dwh.shape[2])))
+        D = Ds[:, -1]
+    P = Ps[:, -1]                                   # each recorded cycle: dw -> P dw + D
     for i, p in enumerate(np.concatenate(owner)):   # in march order, so cycles chain in order
         dwh[p] = P[i] @ dwh[p] + D[i]
     return dwh

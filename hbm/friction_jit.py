@@ -1,4 +1,4 @@
-"""Compiled forward march of the friction elements (numba), one element at a time.
+"""Compiled forward march of the friction elements and its Jacobian (numba), one element at a time.
 
 The march of :mod:`hbm.friction` is sequential in time: each step starts from the slider the
 previous one left, and a step with a switch (closing, stick -> slip, slip -> stick) is located
@@ -9,10 +9,15 @@ algorithm, the same formulas and the same decisions as the scalar path of ``fric
 (``_steps_scalar`` / ``_event_scalar``, which tests compare with the vectorized one), compiled
 by numba: one loop over elements and steps at machine speed.
 
+The Jacobian (``sensitivities``, used by ``friction._march_jacobian``) is compiled the same way:
+each step's derivative (the hand-coded full-step slip of ``_slip_jacobians``; the forward-mode
+dual-number replay of ``_replay`` for the switching steps, with the switch times differentiated
+implicitly) and its propagation through the period, the same formulas in the same order.
+
 numba is Debian's python3-numba (a dependency of python3-basix, which python3-dolfinx pulls
 in; ``scripts/setup`` installs it explicitly). Without it, or with ``FE_JOINT_NO_JIT=1``,
-:data:`AVAILABLE` is False and the march stays in numpy. The first call compiles (cached in
-``__pycache__`` for later processes).
+:data:`AVAILABLE` is False and the march and its Jacobian stay in numpy. The first call compiles
+(forward march ~5 s, Jacobian ~13 s of CPU), cached in ``__pycache__`` for later processes.
 """
 from __future__ import annotations
 
@@ -35,6 +40,10 @@ except ImportError:                            # pragma: no cover
             return args[0]
         return lambda f: f
 
+# error_model="numpy" everywhere: a division by zero gives inf / nan as in the numpy marches
+# (which run under np.errstate(divide="ignore", invalid="ignore") and discard such values by
+# their decisions); numba's default raised ZeroDivisionError (the default run's v1 at 101 N)
+
 # the constants of hbm.friction (duplicated as literals: numba freezes module globals at compile
 # time; test_hbm_friction_jit checks they equal friction's)
 SLIP_TOL = 1e-12
@@ -56,17 +65,27 @@ BERN = np.array([[math.comb(k, i) / math.comb(6, i) if i <= k else 0.0 for i in 
 _CLOSE, _EXCESS, _STOP = 0, 1, 2
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
+def _cdiv(a, b):
+    """a / b for complex a or b as numpy divides: a zero b gives (a.real / 0, a.imag / 0) (inf or
+    nan, which the march's decisions discard as the numpy marches do); numba's complex division
+    raises ZeroDivisionError whatever the error model (the default run's v1 at 101 N)."""
+    if b == 0:
+        return complex(a.real / 0.0, a.imag / 0.0)
+    return a / b
+
+
+@njit(cache=True, error_model="numpy")
 def _poly(c, t):
     return c[0] + t * (c[1] + t * (c[2] + t * c[3]))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _dpoly(c, t):
     return c[1] + t * (2.0 * c[2] + t * (3.0 * c[3]))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _cs(x):
     r = math.sqrt(abs(x))
     small = r < 1e-2
@@ -79,7 +98,7 @@ def _cs(x):
     return math.cos(r), 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _mobius_a(a1, a2, d):
     A = (0.5 * d) * (a1 + a2)
     gam = (S6 * d * d) * (a2 * a1.conjugate()).imag
@@ -87,30 +106,30 @@ def _mobius_a(a1, a2, d):
     return c + 1j * (s * gam), s * A
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _rate(ct, Lc, kt, t):
-    return kt * _dpoly(ct, t) / (2.0 * _poly(Lc, t))
+    return _cdiv(kt * _dpoly(ct, t), 2.0 * _poly(Lc, t))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _magnus_k(ct, Lc, kt, z, ta, tb):
     d = tb - ta
     al, be = _mobius_a(_rate(ct, Lc, kt, ta + GAUSS0 * d), _rate(ct, Lc, kt, ta + GAUSS1 * d), d)
     D = be.conjugate() * z + al.conjugate()
-    return (al * z + be) / D, ((al * al.conjugate()).real - (be * be.conjugate()).real) / (D * D)
+    return _cdiv(al * z + be, D), _cdiv((al * al.conjugate()).real - (be * be.conjugate()).real, D * D)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _slip_rate(ct, Lc, kt, z, t):
     return kt * (z.conjugate() * _dpoly(ct, t)).real - _dpoly(Lc, t)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _excess(ct, Lc, kt, w, t):
     return abs(kt * (_poly(ct, t) - w)) - _poly(Lc, t)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fun(kind, ct, Nc, Lc, kt, w, h, t0, t):
     """Value and t-derivative of a switch condition (friction's _close_fun, _excess_fun,
     _stop_fun)."""
@@ -126,7 +145,7 @@ def _fun(kind, ct, Nc, Lc, kt, w, h, t0, t):
     return -_poly(h, (t - t0) / D), -_dpoly(h, (t - t0) / D) / D
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _root(kind, ct, Nc, Lc, kt, w, h, t0, lo, hi, flo, fhi):
     """friction._root_scalar on the condition ``kind``."""
     den = flo - fhi
@@ -152,7 +171,7 @@ def _root(kind, ct, Nc, Lc, kt, w, h, t0, lo, hi, flo, fhi):
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _stop_quadratic(ct, Lc, kt, z, t0, z1, rate0, rate1):
     tm = 0.5 * (t0 + 1.0)
     zm, _ = _magnus_k(ct, Lc, kt, z, t0, tm)
@@ -162,7 +181,7 @@ def _stop_quadratic(ct, Lc, kt, z, t0, z1, rate0, rate1):
     return h
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _horner(a, t):
     v = a[a.size - 1]
     for k in range(a.size - 2, -1, -1):
@@ -170,7 +189,7 @@ def _horner(a, t):
     return v
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _stick_peak(a, ct, Lc, kt, w, t0):
     """friction._stick_peak_scalar."""
     G = np.empty(PEAK_GRID + 1)
@@ -204,7 +223,7 @@ def _stick_peak(a, ct, Lc, kt, w, t0):
     return over, t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _stick_over(ct, Lc, kt, w, t0):
     """friction._stick_over_scalar: (over, tpk); (False, 1.0) when certainly clear."""
     d = np.empty(4, dtype=np.complex128)
@@ -229,7 +248,7 @@ def _stick_over(ct, Lc, kt, w, t0):
     return _stick_peak(a, ct, Lc, kt, w, t0)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _event(ct, Nc, Lc, kt, w, mode, tlo, u1, L1, codes, taus):
     """friction._event_scalar: one step with switches. Writes the switch codes and times into
     codes, taus (MAX_SWITCH,); returns (w, slipped, p, q)."""
@@ -241,7 +260,7 @@ def _event(ct, Nc, Lc, kt, w, mode, tlo, u1, L1, codes, taus):
     elif slipped:
         T0 = kt * (ct[0] - w)
         r0 = abs(T0)
-        z = T0 / r0
+        z = _cdiv(T0, r0)
         p = -kt / (2.0 * r0) + 0j
         q = -p * z * z
     n = 0
@@ -252,7 +271,7 @@ def _event(ct, Nc, Lc, kt, w, mode, tlo, u1, L1, codes, taus):
             p = 0j
             q = 0j
             if kt * abs(pd) > _dpoly(Lc, t):
-                mode, z, code, slipped = M_SLIP, pd / abs(pd), SW_OPEN_SLIP, True
+                mode, z, code, slipped = M_SLIP, _cdiv(pd, abs(pd)), SW_OPEN_SLIP, True
             else:
                 mode, w, code = M_STICK, _poly(ct, t), SW_OPEN_STICK
         elif mode == M_STICK:
@@ -267,8 +286,8 @@ def _event(ct, Nc, Lc, kt, w, mode, tlo, u1, L1, codes, taus):
                           max(_excess(ct, Lc, kt, w, thi), 0.0))
             d = _poly(ct, t) - w
             ad = abs(d)
-            mode, z, slipped = M_SLIP, d / ad, True
-            p, q = -(p - z * z * q.conjugate()) / (2.0 * ad), -(q - z * z * p.conjugate()) / (2.0 * ad)
+            mode, z, slipped = M_SLIP, _cdiv(d, ad), True
+            p, q = _cdiv(-(p - z * z * q.conjugate()), 2.0 * ad), _cdiv(-(q - z * z * p.conjugate()), 2.0 * ad)
         else:
             z1, K1 = _magnus_k(ct, Lc, kt, z, t, 1.0)
             rate1 = _slip_rate(ct, Lc, kt, z1, 1.0)
@@ -294,7 +313,7 @@ def _event(ct, Nc, Lc, kt, w, mode, tlo, u1, L1, codes, taus):
     return w, slipped, p, q
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _steps(kt, ut, tcl, L, al, be, pe, Lpe, bad, tlo, ct, Nc, Lc, w,
            code, wst, slip, mode0, AP, AQ, evc, evt):
     """friction._steps_scalar for one element over one period; fills its record rows and
@@ -313,8 +332,8 @@ def _steps(kt, ut, tcl, L, al, be, pe, Lpe, bad, tlo, ct, Nc, Lc, w,
             T0 = kt * (ut[jm] - w)
             r0 = abs(T0)
             if r0 >= L[jm] * (1.0 - SLIP_TOL):
-                z0, a, b = T0 / r0, al[j], be[j]
-                z1 = (a * z0 + b) / (b.conjugate() * z0 + a.conjugate())
+                z0, a, b = _cdiv(T0, r0), al[j], be[j]
+                z1 = _cdiv(a * z0 + b, b.conjugate() * z0 + a.conjugate())
                 if kt * (z1.conjugate() * pe[j]).real > Lpe[j]:
                     code[j] = SLIP_STEP
                     slip[j] = True
@@ -336,7 +355,7 @@ def _steps(kt, ut, tcl, L, al, be, pe, Lpe, bad, tlo, ct, Nc, Lc, w,
     return w
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def cycle(rows, w, kt, ut, tcl, L, al, be, pe, Lpe, bad, tlo, ct, Nc, Lc,
           code, wst, slip, mode0, AP, AQ, evc, evt, wend):
     """March one period of the elements ``rows`` (of the step tables) from their sliders w,
@@ -347,3 +366,505 @@ def cycle(rows, w, kt, ut, tcl, L, al, be, pe, Lpe, bad, tlo, ct, Nc, Lc,
         wend[i] = _steps(kt[g], ut[g], tcl[g], L[g], al[g], be[g], pe[g], Lpe[g], bad[g], tlo[g],
                          ct[g], Nc[g], Lc[g], w[i], code[i], wst[i], slip[i], mode0[i], AP[i],
                          AQ[i], evc[i], evt[i])
+
+
+# ============================================================================ Jacobian
+# friction._march_jacobian's per-element work compiled: each step's derivative (the hand-coded
+# full-step slip of _slip_jacobians, the forward-mode replay of _replay for switching steps) and
+# its propagation through the period (_sources, _propagate), one element at a time. In numpy these
+# were batched over elements but cost a few hundred numpy calls per batch, and the replay's
+# dual numbers one numpy call per arithmetic operation.
+
+#: derivative slots of a replayed step (friction.NSLOT): Re w, Im w, u_t1, u_t2, u_n of the 4
+#: stencil samples, tau; a dual number is a complex row (NS,): value, then the slots
+NSLOT = 15
+NS = NSLOT + 1
+#: friction._VINV: power coefficients of the cubic through the samples at tau = -1, 0, 1, 2
+VINV = np.array([[0.0, 1.0, 0.0, 0.0],
+                 [-1.0 / 3.0, -0.5, 1.0, -1.0 / 6.0],
+                 [0.5, -1.0, 0.5, 0.0],
+                 [-1.0 / 6.0, 0.5, -0.5, 1.0 / 6.0]])
+#: friction._LG, _DLG: Lagrange weights l_m and l_m' of the stencil samples at the Gauss points
+LG = np.array([[g ** i for i in range(4)] for g in (GAUSS0, GAUSS1)]) @ VINV
+DLG = np.array([[i * g ** (i - 1) if i else 0.0 for i in range(4)] for g in (GAUSS0, GAUSS1)]) @ VINV
+
+
+@njit(cache=True, error_model="numpy")
+def _cs_deriv(x: float) -> tuple:
+    """friction._cs_array(x, deriv=True) for one float: (c, s, dc/dx, ds/dx)."""
+    r = math.sqrt(abs(x))
+    small = r < 1e-2
+    th = math.tanh(r)
+    sp = 1.0 + x * (-1.0 / 3.0 + x * (2.0 / 15.0)) if small else th / r
+    cn = math.cos(r)
+    sn = math.sin(r) / r if r > 0.0 else 1.0
+    xs = 1.0 if small else x
+    if x >= 0.0:
+        dsp = -1.0 / 3.0 + x * (4.0 / 15.0 - x * 17.0 / 105.0) if small else (1.0 - th * th - sp) / (2.0 * xs)
+        return 1.0, sp, 0.0, dsp
+    dsn = 1.0 / 6.0 + x * (1.0 / 60.0 + x / 1680.0) if small else (cn - sn) / (2.0 * xs)
+    return cn, sn, 0.5 * sn, dsn
+
+
+@njit(cache=True, error_model="numpy")
+def _slip_jac(kt: float, mukn: float, Lg0: float, Lg1: float, pg0: complex, pg1: complex,
+              u0: complex, w: complex, Lj: float, A: np.ndarray, G: np.ndarray) -> None:
+    """friction._slip_jacobians for one full-step slip: fills A (2, 2) = d w_j / d w_{j-1} and
+    G (2, 3, 4) = d w_j / d(u_t1, u_t2, u_n of the stencil samples), w as (Re, Im).
+
+    Args:
+        kt: N/mm. mukn: mu kn, N/mm. Lg0, Lg1: limit at the Gauss points, N. pg0, pg1: u_t' there
+        (complex, mm per unit tau). u0: u_t at the step start, mm. w: slider at the start, mm.
+        Lj: limit at the step end, N.
+    """
+    a1, a2 = _cdiv(0.5 * kt * pg0, Lg0), _cdiv(0.5 * kt * pg1, Lg1)
+    Am = 0.5 * (a1 + a2)
+    gam = S6 * (a2 * a1.conjugate()).imag
+    c, s, dc, ds = _cs_deriv((Am * Am.conjugate()).real - gam * gam)
+    al, be = c + 1j * s * gam, s * Am
+    T0 = kt * (u0 - w)
+    r0 = abs(T0)
+    z0 = _cdiv(T0, r0)
+    D = be.conjugate() * z0 + al.conjugate()
+    z1 = _cdiv(al * z0 + be, D)
+    K0 = _cdiv((al * al.conjugate()).real - (be * be.conjugate()).real, D ** 2)
+    ax = dc + 1j * ds * gam                                     # d al / dx, d be / dx
+    Kx = _cdiv(ax * z0 + ds * Am - z1 * z0 * ds * Am.conjugate() - z1 * ax.conjugate(), D)
+    PA = _cdiv(s, D) + Kx * Am.conjugate()                      # dz1 = PA dA + QA conj(dA)
+    QA = _cdiv(-z1 * z0 * s, D) + Kx * Am
+    h = (0.5j * S6) * (_cdiv(1j * s * (z0 + z1), D) - 2.0 * gam * Kx)
+    P0, P1 = 0.5 * PA + h * a2.conjugate(), 0.5 * PA - h * a1.conjugate()   # of da_g
+    Q0, Q1 = 0.5 * QA - h * a2, 0.5 * QA + h * a1                           # of conj(da_g)
+    ka0, ka1 = 0.5 * kt / Lg0, 0.5 * kt / Lg1                               # da_g / dp'_g
+    R0, R1 = _cdiv(-(P0 * a1 + Q0 * a1.conjugate()), Lg0), _cdiv(-(P1 * a2 + Q1 * a2.conjugate()), Lg1)
+    Pw, Qw = _cdiv(-kt * K0, 2.0 * r0), _cdiv(kt * K0 * z0 ** 2, 2.0 * r0)  # through z0 = T0/|T0|
+    f = -Lj / kt                                                            # w_j = u_j - L_j z1 / kt
+    for m in range(4):
+        Pu = (P0 * ka0) * DLG[0, m] + (P1 * ka1) * DLG[1, m]
+        Qu = (Q0 * ka0) * DLG[0, m] + (Q1 * ka1) * DLG[1, m]
+        Rn = (R0 * LG[0, m] + R1 * LG[1, m]) * mukn
+        if m == 1:
+            Pu, Qu = Pu - Pw, Qu - Qw
+        Pu, Qu, Rn = f * Pu, f * Qu, f * Rn
+        if m == 2:
+            Pu += 1.0
+            Rn -= z1 * mukn / kt
+        c0, c1 = Pu + Qu, 1j * (Pu - Qu)                        # friction._to_real
+        G[0, 0, m], G[0, 1, m], G[1, 0, m], G[1, 1, m] = c0.real, c1.real, c0.imag, c1.imag
+        G[0, 2, m], G[1, 2, m] = Rn.real, Rn.imag
+    c0, c1 = f * Pw + f * Qw, 1j * (f * Pw - f * Qw)
+    A[0, 0], A[0, 1], A[1, 0], A[1, 1] = c0.real, c1.real, c0.imag, c1.imag
+
+
+# ---------------------------------------------------------------------------- dual numbers
+# friction._Dual's operations on duals that are rows (value, then the NSLOT derivative slots) of
+# a workspace ``ws = (W, n)``: W (WS_ROWS, NS) complex, n[0] its next free row, reset for each
+# step. A dual is its row index; a cubic's coefficients are 4 consecutive rows, named by the
+# first. Every operation writes a fresh row: allocating each intermediate (~0.1 µs) or viewing
+# it (~0.03 µs) cost more than its arithmetic. The derivative formulas and their operand order
+# are _Dual's (the compiled Jacobian is numpy's to ~1e-13). Loops, not array expressions: numba
+# compiles each array expression into its own kernel (the replay's took a minute to compile).
+#: workspace rows; a replayed step takes at most ~610 (slip -> stick -> slip -> stick)
+WS_ROWS = 2048
+
+
+@njit(cache=True, error_model="numpy")
+def workspace() -> tuple:
+    """A dual-number workspace (W, n) for _event_jac."""
+    return np.empty((WS_ROWS, NS), dtype=np.complex128), np.zeros(1, dtype=np.int64)
+
+
+@njit(cache=True, error_model="numpy")
+def _new(ws: tuple, m: int) -> int:
+    """Index of m fresh consecutive rows of ws."""
+    W, n = ws
+    i = n[0]
+    if i + m > W.shape[0]:
+        raise RuntimeError("friction_jit: dual workspace exhausted (raise WS_ROWS)")
+    n[0] = i + m
+    return i
+
+
+@njit(cache=True, error_model="numpy")
+def _dk(ws: tuple, v: complex) -> int:
+    """The constant v as a dual."""
+    W, x = ws[0], _new(ws, 1)
+    W[x, :] = 0.0
+    W[x, 0] = v
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dadd(ws: tuple, a: int, b: int) -> int:
+    """a + b."""
+    W, x = ws[0], _new(ws, 1)
+    for i in range(NS):
+        W[x, i] = W[a, i] + W[b, i]
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dsub(ws: tuple, a: int, b: int) -> int:
+    """a - b."""
+    W, x = ws[0], _new(ws, 1)
+    for i in range(NS):
+        W[x, i] = W[a, i] - W[b, i]
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dsc(ws: tuple, c: complex, a: int) -> int:
+    """c a for a plain number c."""
+    W, x = ws[0], _new(ws, 1)
+    for i in range(NS):
+        W[x, i] = W[a, i] * c
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dquo(ws: tuple, a: int, c: float) -> int:
+    """a / c for a plain number c."""
+    W, x = ws[0], _new(ws, 1)
+    for i in range(NS):
+        W[x, i] = _cdiv(W[a, i], c)
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dplus(ws: tuple, a: int, c: float) -> int:
+    """a + c for a plain number c."""
+    W, x = ws[0], _new(ws, 1)
+    for i in range(NS):
+        W[x, i] = W[a, i]
+    W[x, 0] += c
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dmul(ws: tuple, a: int, b: int) -> int:
+    """a b."""
+    W, x = ws[0], _new(ws, 1)
+    va, vb = W[a, 0], W[b, 0]
+    W[x, 0] = va * vb
+    for i in range(1, NS):
+        W[x, i] = W[a, i] * vb + W[b, i] * va
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _ddiv(ws: tuple, a: int, b: int) -> int:
+    """a / b."""
+    W, x = ws[0], _new(ws, 1)
+    vb = W[b, 0]
+    q = _cdiv(W[a, 0], vb)
+    W[x, 0] = q
+    for i in range(1, NS):
+        W[x, i] = _cdiv(W[a, i] - W[b, i] * q, vb)
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dconj(ws: tuple, a: int) -> int:
+    """conj(a)."""
+    W, x = ws[0], _new(ws, 1)
+    for i in range(NS):
+        W[x, i] = W[a, i].conjugate()
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dabs(ws: tuple, a: int) -> int:
+    """|a| (a real dual)."""
+    W, x = ws[0], _new(ws, 1)
+    va = W[a, 0]
+    r = abs(va)
+    W[x, 0] = r
+    for i in range(1, NS):
+        W[x, i] = (va.conjugate() * W[a, i]).real / r
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dre(ws: tuple, a: int) -> int:
+    """Re a."""
+    W, x = ws[0], _new(ws, 1)
+    for i in range(NS):
+        W[x, i] = W[a, i].real
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _dim(ws: tuple, a: int) -> int:
+    """Im a."""
+    W, x = ws[0], _new(ws, 1)
+    for i in range(NS):
+        W[x, i] = W[a, i].imag
+    return x
+
+
+@njit(cache=True, error_model="numpy")
+def _xpoly(ws: tuple, c: int, t: int) -> int:
+    """friction._poly on duals (c: the cubic's first row, t)."""
+    return _dadd(ws, c, _dmul(ws, t, _dadd(ws, c + 1, _dmul(ws, t, _dadd(ws, c + 2, _dmul(ws, t, c + 3))))))
+
+
+@njit(cache=True, error_model="numpy")
+def _xdpoly(ws: tuple, c: int, t: int) -> int:
+    """friction._dpoly on duals."""
+    return _dadd(ws, c + 1, _dmul(ws, t, _dadd(ws, _dsc(ws, 2.0, c + 2), _dmul(ws, t, _dsc(ws, 3.0, c + 3)))))
+
+
+@njit(cache=True, error_model="numpy")
+def _xcs(ws: tuple, x: int) -> tuple:
+    """friction._cs on a (real) dual: (c, s)."""
+    W = ws[0]
+    c, s, dc, ds = _cs_deriv(W[x, 0].real)
+    cd, sd = _dsc(ws, dc, x), _dsc(ws, ds, x)
+    W[cd, 0], W[sd, 0] = c, s
+    return cd, sd
+
+
+@njit(cache=True, error_model="numpy")
+def _xmobius_a(ws: tuple, a1: int, a2: int, d: int) -> tuple:
+    """friction._mobius_a on duals."""
+    A = _dmul(ws, _dsc(ws, 0.5, d), _dadd(ws, a1, a2))
+    gam = _dmul(ws, _dmul(ws, _dsc(ws, S6, d), d), _dim(ws, _dmul(ws, a2, _dconj(ws, a1))))
+    c, s = _xcs(ws, _dsub(ws, _dre(ws, _dmul(ws, A, _dconj(ws, A))), _dmul(ws, gam, gam)))
+    return _dadd(ws, c, _dsc(ws, 1j, _dmul(ws, s, gam))), _dmul(ws, s, A)
+
+
+@njit(cache=True, error_model="numpy")
+def _xrate(ws: tuple, ct: int, Lc: int, kt: float, t: int) -> int:
+    """friction._rate on duals."""
+    return _ddiv(ws, _dsc(ws, kt, _xdpoly(ws, ct, t)), _dsc(ws, 2.0, _xpoly(ws, Lc, t)))
+
+
+@njit(cache=True, error_model="numpy")
+def _xmagnus(ws: tuple, ct: int, Lc: int, kt: float, z: int, ta: int, tb: int) -> int:
+    """friction._magnus on duals."""
+    d = _dsub(ws, tb, ta)
+    al, be = _xmobius_a(ws, _xrate(ws, ct, Lc, kt, _dadd(ws, ta, _dsc(ws, GAUSS0, d))),
+                        _xrate(ws, ct, Lc, kt, _dadd(ws, ta, _dsc(ws, GAUSS1, d))), d)
+    return _ddiv(ws, _dadd(ws, _dmul(ws, al, z), be), _dadd(ws, _dmul(ws, _dconj(ws, be), z), _dconj(ws, al)))
+
+
+@njit(cache=True, error_model="numpy")
+def _xslip_rate(ws: tuple, ct: int, Lc: int, kt: float, z: int, t: int) -> int:
+    """friction._slip_rate on duals."""
+    return _dsub(ws, _dsc(ws, kt, _dre(ws, _dmul(ws, _dconj(ws, z), _xdpoly(ws, ct, t)))), _xdpoly(ws, Lc, t))
+
+
+@njit(cache=True, error_model="numpy")
+def _xexcess(ws: tuple, ct: int, Lc: int, kt: float, w: int, t: int) -> int:
+    """friction._excess on duals."""
+    return _dsub(ws, _dabs(ws, _dsc(ws, kt, _dsub(ws, _xpoly(ws, ct, t), w))), _xpoly(ws, Lc, t))
+
+
+@njit(cache=True, error_model="numpy")
+def _xstop_quadratic(ws: tuple, ct: int, Lc: int, kt: float, z: int, t0: int, rate0: int,
+                     rate1: int) -> int:
+    """friction._stop_quadratic on duals: the coefficients' first row."""
+    tm = _dsc(ws, 0.5, _dplus(ws, t0, 1.0))
+    rm = _xslip_rate(ws, ct, Lc, kt, _xmagnus(ws, ct, Lc, kt, z, t0, tm), tm)
+    h1 = _dsub(ws, _dsub(ws, _dsc(ws, 4.0, rm), _dsc(ws, 3.0, rate0)), rate1)
+    h2 = _dsub(ws, _dsc(ws, 2.0, _dadd(ws, rate0, rate1)), _dsc(ws, 4.0, rm))
+    h3 = _dsc(ws, 0.0, rate0)
+    W, h = ws[0], _new(ws, 4)
+    W[h], W[h + 1], W[h + 2], W[h + 3] = W[rate0], W[h1], W[h2], W[h3]
+    return h
+
+
+@njit(cache=True, error_model="numpy")
+def _ximplicit(ws: tuple, kind: int, ct: int, Nc: int, Lc: int, kt: float, w: int, h: int, ta: int,
+               tau: float) -> int:
+    """friction._implicit: the switch time tau (a root of the condition ``kind``) as a dual,
+    dtau = -f_x / f_tau (f_tau from the tau slot, which the result leaves zero)."""
+    W = ws[0]
+    x = _dk(ws, tau)
+    W[x, NSLOT] = 1.0
+    if kind == _CLOSE:
+        f = _xpoly(ws, Nc, x)
+    elif kind == _EXCESS:
+        f = _xexcess(ws, ct, Lc, kt, w, x)
+    else:
+        f = _xpoly(ws, h, _ddiv(ws, _dsub(ws, x, ta), _dplus(ws, _dsc(ws, -1.0, ta), 1.0)))
+    ft = W[f, NSLOT].real if W[f, NSLOT].real != 0 else np.inf
+    out = _dk(ws, tau)
+    for i in range(1, NSLOT):
+        W[out, i] = -W[f, i].real / ft
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _xreplay(ws: tuple, mode0: int, codes: np.ndarray, taus: np.ndarray, ct: int, Nc: int, Lc: int,
+             kt: float, w: int, u1: int, L1: int) -> int:
+    """friction._replay for one step: the end slider as a dual, following the recorded switches
+    codes, taus (MAX_SWITCH,; zero-padded) from the start state mode0."""
+    t, z, t1, mode = _dk(ws, 0.0), _dk(ws, 0.0), _dk(ws, 1.0), mode0
+    if mode0 == M_SLIP:
+        T0 = _dsc(ws, kt, _dsub(ws, ct, w))
+        z = _ddiv(ws, T0, _dabs(ws, T0))
+    for s in range(MAX_SWITCH):
+        code = codes[s]
+        if code == 0:
+            break
+        if code == SW_OPEN_STICK or code == SW_OPEN_SLIP:
+            t = _ximplicit(ws, _CLOSE, ct, Nc, Lc, kt, w, -1, t, taus[s])
+            if code == SW_OPEN_STICK:
+                w, mode = _xpoly(ws, ct, t), M_STICK
+            else:
+                pd = _xdpoly(ws, ct, t)
+                z, mode = _ddiv(ws, pd, _dabs(ws, pd)), M_SLIP
+        elif code == SW_STICK_SLIP or code == SW_STICK_SLIP_AT:
+            if code == SW_STICK_SLIP:
+                t = _ximplicit(ws, _EXCESS, ct, Nc, Lc, kt, w, -1, t, taus[s])
+            d = _dsub(ws, _xpoly(ws, ct, t), w)
+            z, mode = _ddiv(ws, d, _dabs(ws, d)), M_SLIP
+        else:
+            if code == SW_SLIP_STICK:
+                z1 = _xmagnus(ws, ct, Lc, kt, z, t, t1)
+                h = _xstop_quadratic(ws, ct, Lc, kt, z, t, _xslip_rate(ws, ct, Lc, kt, z, t),
+                                     _xslip_rate(ws, ct, Lc, kt, z1, t1))
+                ta = t
+                t = _ximplicit(ws, _STOP, ct, Nc, Lc, kt, w, h, ta, taus[s])
+                z = _xmagnus(ws, ct, Lc, kt, z, ta, t)
+            w, mode = _dsub(ws, _xpoly(ws, ct, t), _dquo(ws, _dmul(ws, _xpoly(ws, Lc, t), z), kt)), M_STICK
+    if mode == M_STICK:
+        return w
+    return _dsub(ws, u1, _dquo(ws, _dmul(ws, L1, _xmagnus(ws, ct, Lc, kt, z, t, t1)), kt))
+
+
+@njit(cache=True, error_model="numpy")
+def _event_jac(ws: tuple, ct: np.ndarray, Nc: np.ndarray, kt: float, mu: float, kn: float, w: complex,
+               u1: complex, L1: float, mode0: int, codes: np.ndarray, taus: np.ndarray, A: np.ndarray,
+               G: np.ndarray) -> None:
+    """friction._event_jacobians for one switching step (A, G as _slip_jac): the replay seeded
+    as friction._seeds (slots Re w, Im w, u_t1, u_t2, u_n of the stencil samples, tau)."""
+    W, n = ws
+    n[0] = 0
+    wd, u1d, L1d = _dk(ws, w), _dk(ws, u1), _dk(ws, L1)
+    W[wd, 1], W[wd, 2] = 1.0, 1j
+    W[u1d, 5], W[u1d, 9], W[L1d, 13] = 1.0, 1j, mu * kn
+    ctd, Ncd = _new(ws, 4), _new(ws, 4)
+    W[ctd:ctd + 4] = 0.0
+    W[Ncd:Ncd + 4] = 0.0
+    for i in range(4):
+        W[ctd + i, 0], W[Ncd + i, 0] = ct[i], Nc[i]
+        for m in range(4):
+            W[ctd + i, 3 + m], W[ctd + i, 7 + m] = VINV[i, m], 1j * VINV[i, m]
+            W[Ncd + i, 11 + m] = kn * VINV[i, m]
+    Lcd = _new(ws, 4)
+    for i in range(4):
+        W[Lcd + i] = W[_dsc(ws, mu, Ncd + i)]
+    d = _xreplay(ws, mode0, codes, taus, ctd, Ncd, Lcd, kt, wd, u1d, L1d)
+    A[0, 0], A[0, 1], A[1, 0], A[1, 1] = W[d, 1].real, W[d, 2].real, W[d, 1].imag, W[d, 2].imag
+    for r in range(3):
+        for m in range(4):
+            G[0, r, m], G[1, r, m] = W[d, 3 + 4 * r + m].real, W[d, 3 + 4 * r + m].imag
+
+
+@njit(cache=True, error_model="numpy")
+def _step(ws: tuple, i: int, e: int, j: int, kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst, mode0,
+          evc, evt, A: np.ndarray, G: np.ndarray) -> None:
+    """Derivatives A, G (see _slip_jac) of step j of record row i (step tables row e), a slip
+    or switching step."""
+    if code[i, j] == SLIP_STEP:
+        _slip_jac(kt[e], mu[e] * kn[e], Lg[e, j, 0], Lg[e, j, 1], pg[e, j, 0], pg[e, j, 1],
+                  ut[e, j - 1], wst[i, j], L[e, j], A, G)
+    else:
+        _event_jac(ws, ct[e, j], Nc[e, j], kt[e], mu[e], kn[e], wst[i, j], ut[e, j], L[e, j],
+                   mode0[i, j], evc[i, j], evt[i, j], A, G)
+
+
+@njit(cache=True, error_model="numpy")
+def _propagate(j: int, A: np.ndarray, G: np.ndarray, E: np.ndarray, P: np.ndarray, D: np.ndarray,
+               P2: np.ndarray, D2: np.ndarray, S: np.ndarray) -> None:
+    """One step of friction._propagate: (P2, D2) = A (P, D) + (0, G (x) E of the stencil of step
+    j) (friction._sources), harmonics in the element layout direction * nH + harmonic."""
+    nt, nH = E.shape
+    S[:] = 0.0
+    for m in range(4):
+        Em = E[(j - 2 + m) % nt]
+        for r in range(2):
+            for dd in range(3):
+                g = G[r, dd, m]
+                for x in range(nH):
+                    S[r, dd * nH + x] += g * Em[x]
+    for r in range(2):
+        for x in range(3 * nH):
+            D2[r, x] = A[r, 0] * D[0, x] + A[r, 1] * D[1, x] + S[r, x]
+        for c in range(2):
+            P2[r, c] = A[r, 0] * P[0, c] + A[r, 1] * P[1, c]
+
+
+@njit(cache=True, error_model="numpy")
+def sensitivities(g: np.ndarray, kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst, mode0, evc, evt,
+                  E: np.ndarray, full: bool, Ps: np.ndarray, Ds: np.ndarray) -> None:
+    """Slider sensitivities of recorded periods (friction._local_jacobians, _sources and
+    _propagate compiled), one record row at a time: after step j, dw_j = Ps[j] dw_0 + Ds[j].
+
+    Args:
+        g: (k,) step-table row of each record row. kt, mu, kn, ut, L, Lg, pg, ct, Nc: the step
+            tables (friction._StepTables). code, wst, mode0, evc, evt: the records (k, nt, ...).
+        E: (nt, nH) inverse DFT. full: snapshots after every step, else after the last only.
+        Ps, Ds: outputs (k, nt or 1, 2, 2) and (k, 2, nt or 1, 3 nH) (laid out as the force
+            sensitivities, see force_sensitivities), mm per mm of harmonic, harmonics in the
+            element layout direction * nH + harmonic.
+    """
+    nt, nH = E.shape
+    ws = workspace()
+    P, D, P2, D2 = np.empty((2, 2)), np.empty((2, 3 * nH)), np.empty((2, 2)), np.empty((2, 3 * nH))
+    A, G, S = np.empty((2, 2)), np.empty((2, 3, 4)), np.empty((2, 3 * nH))
+    for i in range(g.size):
+        P[:] = 0.0
+        P[0, 0] = P[1, 1] = 1.0
+        D[:] = 0.0
+        for j in range(nt):
+            if code[i, j] == OPEN_STEP:                # w_j = u_j: forgets the start
+                P[:] = 0.0
+                D[:] = 0.0
+                D[0, 0:nH], D[1, nH:2 * nH] = E[j], E[j]
+            elif code[i, j] != STICK_STEP:             # (stick: A = I, no source)
+                _step(ws, i, g[i], j, kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst, mode0, evc,
+                      evt, A, G)
+                _propagate(j, A, G, E, P, D, P2, D2, S)
+                P, P2, D, D2 = P2, P, D2, D
+            if full or j == nt - 1:
+                jj = j if full else 0
+                Ps[i, jj] = P
+                Ds[i, 0, jj], Ds[i, 1, jj] = D[0], D[1]
+
+
+@njit(cache=True, error_model="numpy")
+def step_jacobians(g: np.ndarray, kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst, mode0, evc, evt,
+                   A: np.ndarray, G: np.ndarray) -> None:
+    """Every step's derivatives as friction._local_jacobians, A (k, nt, 2, 2), G (k, nt, 2, 3,
+    4) (stick: I, 0; open: 0, the end sample); for tests (sensitivities works on the fly)."""
+    ws = workspace()
+    for i in range(g.size):
+        for j in range(code.shape[1]):
+            A[i, j] = 0.0
+            G[i, j] = 0.0
+            if code[i, j] == STICK_STEP:
+                A[i, j, 0, 0] = A[i, j, 1, 1] = 1.0
+            elif code[i, j] == OPEN_STEP:
+                G[i, j, 0, 0, 2] = G[i, j, 1, 1, 2] = 1.0
+            else:
+                _step(ws, i, g[i], j, kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst, mode0, evc,
+                      evt, A[i, j], G[i, j])
+
+
+@njit(cache=True, error_model="numpy")
+def force_sensitivities(kt: np.ndarray, Ps: np.ndarray, dw0: np.ndarray, E: np.ndarray,
+                        Ds: np.ndarray) -> None:
+    """dT = kt (E_j - dw_j) with dw_j = Ps[:, j] dw0 + Ds[:, :, j] (friction._march_jacobian's
+    last lines), written over Ds (k, 2, nt, 3 nH): N per mm of harmonic."""
+    k, nt = Ps.shape[0], Ps.shape[1]
+    nH = E.shape[1]
+    for i in range(k):
+        for r in range(2):
+            for j in range(nt):
+                for x in range(3 * nH):
+                    dw = Ps[i, j, r, 0] * dw0[i, 0, x] + Ps[i, j, r, 1] * dw0[i, 1, x] + Ds[i, r, j, x]
+                    ex = E[j, x - r * nH] if r * nH <= x < (r + 1) * nH else 0.0
+                    Ds[i, r, j, x] = kt[i] * (ex - dw)

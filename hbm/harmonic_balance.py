@@ -134,6 +134,31 @@ def _contact_operator(dofs: np.ndarray, n: int) -> sp.csr_matrix:
                          shape=(3 * ne, n))
 
 
+
+def _modal_apply(Psi: np.ndarray, Ls: list, v: np.ndarray) -> np.ndarray:
+    """Modal part of the receptance on real harmonic rows: (n_H, n) -> (n_H, n).
+
+    Row 0 is the mean, rows 2h-1, 2h the cosine and sine of harmonic h (complex amplitude
+    c_h = x - i y); Ls[h] the modal factors of harmonic h, (m,) diagonal or (m, m). The two
+    products with the real mode shapes Psi (n, m) run once on all real rows: complex products per
+    harmonic converted Psi to complex on every call, which cost more than the products.
+    """
+    W = Psi.T @ v.T                                                   # (m, n_H)
+    S = np.empty_like(W)
+    for h, L in enumerate(Ls):
+        if h == 0:
+            S[:, 0] = (L * W[:, 0]).real if L.ndim == 1 else (L @ W[:, 0]).real
+        elif L.ndim == 1:
+            # (a + ib)(x - iy) in real arithmetic: numpy's complex product may contract to FMA
+            # on some paths and not on others, which made two equal runs differ in the last bit
+            a, b, x, y = L.real, L.imag, W[:, 2 * h - 1], W[:, 2 * h]
+            S[:, 2 * h - 1] = a * x + b * y
+            S[:, 2 * h] = a * y - b * x
+        else:
+            z = L @ (W[:, 2 * h - 1] - 1j * W[:, 2 * h])
+            S[:, 2 * h - 1], S[:, 2 * h] = z.real, -z.imag
+    return (Psi @ S).T
+
 class HarmonicBalance:
     """Harmonic balance solver for ``s`` with friction contacts ``c``.
 
@@ -227,18 +252,9 @@ class HarmonicBalance:
         G = self.G
         # static residual flexibility is real and the same for every harmonic: one real product
         out = (G.R @ g.T).T if static else np.zeros_like(g)
-        cpl = np.concatenate([g[:1], g[1::2] - 1j * g[2::2]]).T          # (nc, H+1)
-        PtC = G.Psi.T @ cpl                                               # (m, H+1)
-        for h in range(self.H + 1):
-            L = G.modal(h, omega) if factors is None else factors[h]
-            if transpose:
-                L = L.conj()
-            PtC[:, h] = L * PtC[:, h] if L.ndim == 1 else L @ PtC[:, h]
-        u = G.Psi @ PtC
-        out[0] += u[:, 0].real
+        Ls = [G.modal(h, omega) if factors is None else factors[h] for h in range(self.H + 1)]
         # transposed blocks [[a, -b], [b, a]] act as conj(G) = a - i b on c = x - i y
-        out[1::2] += u[:, 1:].real.T
-        out[2::2] -= u[:, 1:].imag.T
+        out += _modal_apply(G.Psi, [L.conj() for L in Ls] if transpose else Ls, g)
         return out
 
     # ------------------------------------------------------------------ residual
@@ -427,17 +443,7 @@ class HarmonicBalance:
         Ls = [G.modal(h, omega) for h in range(self.H + 1)]
 
         def gapply_red(v):                                    # v (nH, p) real
-            out = (R @ v.T).T
-            cpl = np.concatenate([v[:1], v[1::2] - 1j * v[2::2]]).T
-            PtC = Psi.T @ cpl
-            for h in range(self.H + 1):
-                L = Ls[h]
-                PtC[:, h] = L * PtC[:, h] if L.ndim == 1 else L @ PtC[:, h]
-            u = Psi @ PtC
-            out[0] += u[:, 0].real
-            out[1::2] += u[:, 1:].real.T
-            out[2::2] -= u[:, 1:].imag.T
-            return out
+            return (R @ v.T).T + _modal_apply(Psi, Ls, v)
 
         def matvec(x):
             ge = np.einsum("kxy,ky->kx", Dg, x[idx])
@@ -463,19 +469,22 @@ class HarmonicBalance:
             facs.append((sla.lu_factor(np.eye(Lm.shape[0]) + Lm @ VtAU, check_finite=False), Lm))
 
         def prec(x):
-            v = x.reshape(nH, p)
-            out = np.empty_like(v)
-            y = sla.lu_solve(lu, v.T, check_finite=False)      # (p, nH): A^-1 on all harmonic rows
+            # (A + Psi L V^T)^-1 = A^-1 - A^-1 Psi (I + L V^T A^-1 Psi)^-1 L V^T A^-1 per harmonic,
+            # with harmonic h's complex row y_c - i y_s. The two (p × m) products run once on all
+            # real harmonic rows: a complex product per harmonic converted the real factors to
+            # complex on every call (a quarter of a default curve's time)
+            y = sla.lu_solve(lu, x.reshape(nH, p).T, check_finite=False)   # (p, nH)
+            W = VtK @ y                                                    # (m, nH)
+            S = np.empty_like(W)
             for h in range(self.H + 1):
                 f, Lm = facs[h]
-                yh = y[:, 0].astype(complex) if h == 0 else y[:, 2 * h - 1] - 1j * y[:, 2 * h]
-                # (A + Psi L V^T)^-1 = A^-1 - A^-1 Psi (I + L V^T A^-1 Psi)^-1 L V^T A^-1
-                z = yh - AinvU @ sla.lu_solve(f, Lm @ (VtK @ yh), check_finite=False)
+                wh = W[:, 0] if h == 0 else W[:, 2 * h - 1] - 1j * W[:, 2 * h]
+                sh = sla.lu_solve(f, Lm @ wh, check_finite=False)
                 if h == 0:
-                    out[0] = z.real
+                    S[:, 0] = sh.real
                 else:
-                    out[2 * h - 1], out[2 * h] = z.real, -z.imag
-            return out.ravel()
+                    S[:, 2 * h - 1], S[:, 2 * h] = sh.real, -sh.imag
+            return (y - AinvU @ S).T.ravel()
 
         return matvec, prec
 

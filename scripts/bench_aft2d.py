@@ -16,10 +16,10 @@ Magnus/Möbius slip steps, switches located inside the steps). Prints markdown t
 2. Cost per evaluation (min of interleaved repeats): synthetic joint of 300 elements (random 2D
    orbits, normal oscillation, n0 in [1, 20] N; H = 3, n_t = 128), and one element (1D, 2D).
 
-3. With ``--march`` (only): the working tree's numpy march against its compiled one
-   (hbm.friction_jit), same cases as 2.
+3. With ``--march`` (only): the working tree's numpy march and Jacobian against the compiled
+   march (hbm.friction_jit) with the numpy Jacobian and with the compiled one, same cases as 2.
 
-Usage: OMP_NUM_THREADS=1 python scripts/bench_aft2d.py [--old REV] [--repeat 5] [--quick] [--march]
+Usage: OMP_NUM_THREADS=1 python scripts/bench_aft2d.py [--old REV] [--repeat 5] [--quick] [--march [--cpu]]
 
 Measured here (shared 2-core machine, old vs new in the same run, --repeat 7; the cost ratios
 drifted between 2.0 and 2.4 (F) and 1.6 and 2.2 (F + J) over four runs with the machine's load):
@@ -202,28 +202,35 @@ def cost_rows(mods, names, repeat: int):
     return out
 
 
-def march_rows(repeat: int):
-    """(case, {(march, jacobian): seconds}): the working tree's numpy march against its compiled
-    one (hbm.friction_jit), interleaved repeats (min)."""
+#: the marches of march_rows: (label, USE_JIT, JIT_JACOBIAN) of hbm.friction
+MARCHES = (("numpy", False, False), ("compiled march", True, False), ("compiled", True, True))
+
+
+def march_rows(repeat: int, clock=time.perf_counter):
+    """(case, {(march, jacobian): seconds}): the working tree's numpy march and Jacobian, its
+    compiled march with the numpy Jacobian, and both compiled (hbm.friction_jit); interleaved
+    repeats (min) timed by clock. The forward-only cost of the last two is the same march:
+    measured once."""
     import hbm.friction as fr
     f = Fourier(3, 128)
-    cases = [("300 elements, H = 3, n_t = 128", synthetic, {}),
-             ("1 element, 2D slip", one_element, {"twod": True})]
+    # (label, maker, its arguments, evaluations per timing: enough to time above the clock noise)
+    cases = [("300 elements, H = 3, n_t = 128", synthetic, {}, 1),
+             ("30 elements, H = 3, n_t = 128", synthetic, {"ne": 30}, 5),
+             ("1 element, 2D slip", one_element, {"twod": True}, 20)]
     out = []
-    for label, make, kw in cases:
+    for label, make, kw, n in cases:
         c, U = make(hbm, **kw)
-        n = 1 if make is synthetic else 20
         best = {}
         for _ in range(repeat):
-            for jit in (False, True):
-                fr.USE_JIT = jit
-                for jac in (False, True):
+            for name, jit, jit_jac in MARCHES:
+                fr.USE_JIT, fr.JIT_JACOBIAN = jit, jit_jac
+                for jac in ((False, True) if name != "compiled march" else (True,)):
                     c.evaluate(U, f, jac)
-                    t = time.perf_counter()
+                    t = clock()
                     for _ in range(n):
                         c.evaluate(U, f, jac)
-                    best[jit, jac] = min(best.get((jit, jac), np.inf), (time.perf_counter() - t) / n)
-        fr.USE_JIT = True
+                    best[name, jac] = min(best.get((name, jac), np.inf), (clock() - t) / n)
+        fr.USE_JIT, fr.JIT_JACOBIAN = True, True
         out.append((label, best))
     return out
 
@@ -235,14 +242,19 @@ def main(argv=None) -> None:
     ap.add_argument("--quick", action="store_true", help="n_t up to 256, 2 repeats")
     ap.add_argument("--march", action="store_true",
                     help="only the cost of the numpy march against the compiled one")
+    ap.add_argument("--cpu", action="store_true",
+                    help="--march timed in CPU time of this process (steadier on a shared machine)")
     a = ap.parse_args(argv)
     if a.march:
-        print("| evaluate (ms) | numpy F | numpy F + J | compiled F | compiled F + J | numpy/compiled F | numpy/compiled F + J |")
-        print("|---|---|---|---|---|---|---|")
-        for label, b in march_rows(2 if a.quick else a.repeat):
-            print(f"| {label} | {b[False, False] * 1e3:.2f} | {b[False, True] * 1e3:.2f} | "
-                  f"{b[True, False] * 1e3:.2f} | {b[True, True] * 1e3:.2f} | "
-                  f"{b[False, False] / b[True, False]:.1f} | {b[False, True] / b[True, True]:.1f} |")
+        print("| evaluate (ms) | numpy F | numpy F + J | compiled F | compiled F + numpy J "
+              "| compiled F + J | numpy/compiled F | numpy/compiled F + J |")
+        print("|---|---|---|---|---|---|---|---|")
+        clock = time.process_time if a.cpu else time.perf_counter
+        for label, b in march_rows(2 if a.quick else a.repeat, clock):
+            print(f"| {label} | {b['numpy', False] * 1e3:.2f} | {b['numpy', True] * 1e3:.2f} | "
+                  f"{b['compiled', False] * 1e3:.2f} | {b['compiled march', True] * 1e3:.2f} | "
+                  f"{b['compiled', True] * 1e3:.2f} | {b['numpy', False] / b['compiled', False]:.1f} | "
+                  f"{b['numpy', True] / b['compiled', True]:.1f} |")
         return
     nts = NTS[:-1] if a.quick else NTS
     old = load_old(a.old)

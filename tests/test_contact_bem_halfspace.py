@@ -102,3 +102,40 @@ def test_moduli_and_validation():
         hs.displacement(np.zeros((3, 4)))
     with pytest.raises(ValueError, match="traction"):
         hs.tangential_displacement(np.zeros((4, 4)))
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+@pytest.mark.parametrize("shape", [(8, 8), (7, 7), (6, 9), (9, 4)])
+@pytest.mark.parametrize("lead", [(), (3,), (2, 3)])
+def test_pruned_transposed_fft_equals_plain_convolution(periodic, shape, lead):
+    # the operator's FFTs (pruned padding, transposed spectra, 1/N folded into the kernels) give
+    # the plain numpy convolution: zero-padded (DC-FFT) with the cell coefficients, or circular
+    # with the periodic symbol; odd, even and non-square grids, any batch
+    g = Grid(shape, (0.9, 1.3))
+    hs = ElasticHalfSpace(g, E, NU, periodic=periodic)
+    rng = np.random.default_rng(3)
+    p = rng.random(lead + shape)
+    q = rng.random(lead + (2,) + shape)
+    nx, ny = shape
+    if periodic:
+        s = {k: getattr(hs, "_" + k).T / hs._inv_size for k in ("zz", "xx", "yy", "xy")}
+        conv = lambda k, f: np.fft.irfft2(np.fft.rfft2(f) * s[k], s=shape)  # noqa: E731
+    else:
+        ix, iy = np.arange(2 * nx), np.arange(2 * ny)
+        ox = np.where(ix < nx, ix, ix - 2 * nx) * g.dx
+        oy = np.where(iy < ny, iy, iy - 2 * ny) * g.dy
+        c = influence_coefficients(ox[:, None], oy[None, :], g.dx, g.dy, E, NU)
+        s = {k: np.fft.rfft2(v) for k, v in c.items()}
+        conv = lambda k, f: np.fft.irfft2(np.fft.rfft2(f, s=(2 * nx, 2 * ny)) * s[k],  # noqa: E731
+                                          s=(2 * nx, 2 * ny))[..., :nx, :ny]
+    u = conv("zz", p)
+    assert hs.displacement(p).shape == p.shape
+    assert np.abs(hs.displacement(p) - u).max() <= 1e-12 * np.abs(u).max()
+    ux = conv("xx", q[..., 0, :, :]) + conv("xy", q[..., 1, :, :])
+    uy = conv("xy", q[..., 0, :, :]) + conv("yy", q[..., 1, :, :])
+    ut = hs.tangential_displacement(q)
+    assert ut.shape == q.shape
+    assert np.abs(ut[..., 0, :, :] - ux).max() <= 1e-12 * np.abs(ux).max()
+    assert np.abs(ut[..., 1, :, :] - uy).max() <= 1e-12 * np.abs(uy).max()
+    # a field and a batch of one share a plan; calls do not disturb each other's results
+    assert np.array_equal(hs.displacement(p.reshape((-1,) + shape)[:1])[0], hs.displacement(p.reshape((-1,) + shape)[0]))

@@ -42,9 +42,9 @@ STAGE_INPUTS: dict[str, tuple[tuple[str, ...], str]] = {
     # are one stage: splitting them would factorize the 60k-DOF stiffness twice
     "fe": (("geometry", "material", "preload", "reduction"), "1"),
     # the BEM grid spans the overlap (geometry) and uses the elastic constants (material)
-    "contact": (("geometry", "material", "roughness"), "3"),
+    "contact": (("geometry", "material", "roughness"), "4"),
     "dynamics": (("geometry", "material", "roughness", "contact") + _DYNAMICS_CURVES, "8"),
-    "speed": (("geometry", "material", "roughness", "contact", "dynamics"), "3"),
+    "speed": (("geometry", "material", "roughness", "contact", "dynamics"), "4"),
     # the report reads every section (titles, tables, the paper comparison)
     "report": (("geometry", "material", "preload", "reduction", "roughness", "contact",
                 "dynamics"), "3"),

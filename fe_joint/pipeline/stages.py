@@ -288,44 +288,67 @@ def _coarser_models(c, comm) -> list:
 
 
 def stage_speed(ctx: StageContext) -> dict:
-    """Speed against error: BEM grid, HBM harmonics and samples (skipped unless dynamics.speed_study).
+    """Speed against error: BEM grid, HBM harmonics and samples, element count (skipped unless
+    dynamics.speed_study).
 
-    Writes ``speed/speed_error.json`` ({table title: [rows]}); it never touches the study's curves.
+    Every row is a job of the dynamics stage's MPI queue (both ranks busy; a killed stage keeps
+    its finished rows in ``speed/rows``). Writes ``speed/speed_error.json`` ({table title:
+    [rows]}); it never touches the study's curves.
     """
-    from ..study import speed_error
     c = ctx.case
-    tables: dict = {}
-    coarse = _coarser_models(c, ctx.comm) if c.dynamics.speed_study else []
-    if c.dynamics.speed_study and ctx.rank == 0:
-        rm = _reduced_model(ctx)
-        dyn = (ctx.summaries.get("dynamics") or {})
-        levels = dyn.get("levels", [])
-        grids = (64, 128, 256, 512) if c.roughness.grid >= 256 else (32, 64, c.roughness.grid * 2)
-        tables[f"global BEM grid (Rq = {rq_label(c.roughness.v_rq_um)} µm)"] = speed_error.bem_grid(rm, c, grids)
-        mid = len(levels) // 2
-        name = CurveKey("baseline", mid).name
-        have = ctx.path("dynamics", f"{name}.npz").exists()
-        cr = load_curves(ctx.path("dynamics"), [name])[CurveKey("baseline", mid)] if have else None
-        if cr is not None:
-            setup = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
-            joint = joint_baseline(setup, c.contact.k_ref)
-            hs = (1, 3, 5) if c.dynamics.harmonics <= 3 else (1, 3, 5, 7)
-            tables.update(speed_error.hbm_knobs(rm, joint, cr.level, SweepSettings.from_case(c),
-                                                cr.peak_hz, harmonics=hs))
-            fe_s = float(((ctx.summaries.get("fe") or {}).get("timings") or {}).get("total_s", float("nan")))
-            models = []
-            for size, rm_s, sec in coarse + [(c.geometry.lap_mesh_size, rm, fe_s)]:
-                su = ms.interface_setup(rm_s, c.geometry, c.material, c.roughness)
-                models.append((size, rm_s, sec, joint_baseline(su, c.contact.k_ref)))
-            tables["interface elements (lap mesh size; baseline, middle level, FRF peak by a sweep "
-                   "through it)"] = speed_error.mesh_rows(
-                models, cr.level, SweepSettings.from_case(c), cr.peak_hz)
+    tables = _speed_tables(ctx) if c.dynamics.speed_study else {}
     if ctx.rank == 0:
         ctx.path("speed").mkdir(parents=True, exist_ok=True)
         tmp = ctx.path("speed", "speed_error.json.tmp")
         tmp.write_text(json.dumps(tables, indent=1, default=float))
         tmp.replace(ctx.path("speed", "speed_error.json"))
     return {"tables": sorted(tables), "skipped": not c.dynamics.speed_study}
+
+
+def _speed_tables(ctx: StageContext) -> dict:
+    """The speed stage's tables, its rows computed by the job queue on every rank."""
+    from ..study import speed_error as se
+    c = ctx.case
+    rm = _reduced_model(ctx)
+    settings = SweepSettings.from_case(c)
+    levels = (ctx.summaries.get("dynamics") or {}).get("levels", [])
+    grids = (64, 128, 256, 512) if c.roughness.grid >= 256 else (32, 64, c.roughness.grid * 2)
+    key = CurveKey("baseline", len(levels) // 2)
+    # the HBM and element-count tables compare against the study's baseline curve at the middle
+    # level; without it (not in the study, or missing) only the BEM table is made, and the
+    # coarser FE models are not built (every rank sees the same files)
+    cr = (load_curves(ctx.path("dynamics"), [key.name])[key]
+          if levels and ctx.path("dynamics", f"{key.name}.npz").exists() else None)
+    hs = (1, 3, 5) if c.dynamics.harmonics <= 3 else (1, 3, 5, 7)
+    knobs = se.knob_grid(hs) if cr is not None else None
+    models = []
+    if cr is not None:
+        fe_s = float(((ctx.summaries.get("fe") or {}).get("timings") or {}).get("total_s", float("nan")))
+        for size, rm_s, sec in _coarser_models(c, ctx.comm) + [(c.geometry.lap_mesh_size, rm, fe_s)]:
+            su = ms.interface_setup(rm_s, c.geometry, c.material, c.roughness)
+            models.append((size, rm_s, sec, joint_baseline(su, c.contact.k_ref)))
+    f_case = (stuck_modes(rm.K, rm.M, rm.pair_dofs, models[-1][3]).frequency if models else 0.0)
+    jobs = se.speed_jobs(grids, knobs, len(models), (settings.harmonics, settings.samples))
+
+    def run(job: se.SpeedJob) -> dict:
+        if job.table == "bem":
+            return se.bem_row(rm, c, job.grid)
+        if job.table == "mesh":
+            return se.mesh_row(models[job.model], f_case, cr.level, settings, cr.peak_hz)
+        return se.hbm_row(rm, models[-1][3], cr.level, settings, cr.peak_hz, job.harmonics, job.samples)
+
+    folder, stage_key = ctx.path("speed", "rows"), ctx.keys.get("speed", "")
+    if ctx.rank == 0:       # rows of another key (an earlier case) are not this stage's
+        keep = se.read_rows(folder, jobs, stage_key)
+        for f in folder.glob("*.json") if folder.exists() else []:
+            if f.stem not in keep:
+                f.unlink()
+    run_jobs(run, lambda fold, job, row: se.write_row(fold, job, row, stage_key), jobs, folder,
+             comm=ctx.comm)
+    if ctx.rank != 0:
+        return {}
+    out = se.assemble_tables(jobs, se.read_rows(folder, jobs, stage_key), hs[-1])
+    return {f"global BEM grid (Rq = {rq_label(c.roughness.v_rq_um)} µm)": out.pop("bem"), **out}
 
 
 def stage_report(ctx: StageContext) -> dict:

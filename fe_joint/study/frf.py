@@ -203,9 +203,20 @@ def _sweep(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSet
         raise SweepIncomplete(
             f"FRF of {joint.name} at {level:.4g} N peaks at the edge of its branch "
             f"({res.omega[k] / 2 / np.pi:.2f} Hz): widen dynamics.band")
-    peak_sol = _refine_peak(hb, force, rm.response_dof, _polish_peak(hb, force, rm.response_dof, res, k))
+    branch, kb, its = res, k, 0
+    gap = max(abs(res.omega[k + 1] - res.omega[k]), abs(res.omega[k] - res.omega[k - 1]))
+    if gap > PEAK_GAP * res.omega[k]:
+        # the sweep stepped over the top (its steps may be 1/50 of the band): trace it again
+        # finely from the largest point, so that the peak search starts next to the maximum
+        try:
+            branch, kb, its = _local_branch(hb, force, rm.response_dof, float(res.omega[k]),
+                                            res.solutions[k])
+        except ConvergenceError:
+            branch, kb, its = res, k, 0
+    peak_sol = _refine_peak(hb, force, rm.response_dof,
+                            _polish_peak(hb, force, rm.response_dof, branch, kb))
     cr = _curve_result(hb, rm, joint, level, act, peak_sol, res.omega, res.amplitude,
-                       np.asarray(res.stable, bool), res.newton_iterations, t0)
+                       np.asarray(res.stable, bool), res.newton_iterations + its, t0)
     return cr, _full_contact(joint, act, peak_sol)
 
 
@@ -219,6 +230,12 @@ def _full_contact(joint: JointModel, act: np.ndarray, sol) -> np.ndarray:
 PEAK_WINDOW = 0.03
 #: relative fall of the amplitude beyond a maximum that ends the local search
 PEAK_DROP = 0.01
+#: a sweep whose largest point is farther than this (relative) from a neighbour is traced again
+#: finely around it before the peak search (the top-level sweeps step over their tops: the quick
+#: model's v3-rq10 at the top level went from 241.35 to 241.77 Hz over a peak at 241.51 Hz, and
+#: the peak search from there, through a bracket grown to 1.7e-3, ended 3.4e-5 apart on 1 and 2
+#: ranks)
+PEAK_GAP = 2e-4
 
 
 def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.ndarray,
@@ -247,9 +264,34 @@ def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.nda
         if guess.shape[1:] != (3, n_h):
             raise ValueError(f"guess must have shape (ne, 3, {n_h}), got {guess.shape}")
         start = SimpleNamespace(contact=guess[act])   # elements new to the set start at rest
-    w = 2 * np.pi * f_guess
     dof = rm.response_dof
-    # small steps (≤ 0.1 % in frequency, ≤ 5 % in amplitude) near a peak that moved little
+    try:
+        branch, k, its = _local_branch(hb, force, dof, 2 * np.pi * f_guess, start, max_points)
+    except SweepIncomplete:
+        raise SweepIncomplete(f"no resonance peak of {joint.name} at {level:.4g} N within "
+                              f"±{100 * PEAK_WINDOW:g} % of {f_guess:.2f} Hz") from None
+    omega, amp = branch.omega, branch.amplitude
+    peak_sol = _refine_peak(hb, force, dof, _polish_peak(hb, force, dof, branch, k))
+    order = np.argsort(omega)   # a short branch near the peak: shown by frequency
+    cr = _curve_result(hb, rm, joint, level, act, peak_sol, omega[order], amp[order],
+                       np.ones(len(omega), bool), its, t0)
+    return cr, _full_contact(joint, act, peak_sol)
+
+
+def _local_branch(hb, force: np.ndarray, dof: int, w: float, start, max_points: int = 80):
+    """A short, finely stepped branch through the peak next to ``w`` (rad/s), from ``start``.
+
+    Pseudo-arc-length continuation with small steps (≤ 0.1 % in frequency, ≤ 5 % in amplitude)
+    first towards lower frequencies, then, if the amplitude falls that way, towards higher ones,
+    each until it has passed a maximum (two points beyond it and 1 % below it).
+
+    Returns:
+        (branch with omega, amplitude, solutions; index of its largest point; Newton iterations).
+
+    Raises:
+        SweepIncomplete when the largest point is an end of the branch (no peak within
+        ±PEAK_WINDOW); ConvergenceError when Newton fails.
+    """
     local = ContinuationSettings(max_points=max_points, max_domega=w * 1e-3, max_damp=0.05,
                                  stability="none")
 
@@ -279,14 +321,9 @@ def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.nda
         sols = list(lo.solutions)[::-1] + list(hi.solutions)[1:]
     k = int(np.argmax(amp))
     if not 0 < k < len(omega) - 1:
-        raise SweepIncomplete(f"no resonance peak of {joint.name} at {level:.4g} N within "
-                              f"±{100 * PEAK_WINDOW:g} % of {f_guess:.2f} Hz")
-    branch = SimpleNamespace(omega=omega, amplitude=amp, solutions=sols)
-    peak_sol = _refine_peak(hb, force, dof, _polish_peak(hb, force, dof, branch, k))
-    order = np.argsort(omega)   # a short branch near the peak: shown by frequency
-    cr = _curve_result(hb, rm, joint, level, act, peak_sol, omega[order], amp[order],
-                       np.ones(len(omega), bool), its, t0)
-    return cr, _full_contact(joint, act, peak_sol)
+        raise SweepIncomplete(f"no resonance peak within ±{100 * PEAK_WINDOW:g} % of "
+                              f"{w / 2 / np.pi:.2f} Hz")
+    return SimpleNamespace(omega=omega, amplitude=amp, solutions=sols), k, its
 
 
 def _curve_result(hb, rm, joint, level, act, peak_sol, omega, amplitude, stable, iterations,
@@ -359,76 +396,148 @@ def _polish_peak(hb, force: np.ndarray, dof: int, res, k: int, iterations: int =
     return best[2]
 
 
-#: Peak refinement: half-width of the three-point stencil, relative (largest and smallest)
-PEAK_STENCIL = (1e-4, 1e-5)
-#: Peak refinement: stop when the frequency step is below this (relative)
-PEAK_FTOL = 1e-10
+#: Peak search: half-width of the first bracket around the polished peak, relative. Small, so
+#: that on a softening branch the bracket stays on the near side of the fold below the peak.
+PEAK_BRACKET = 1e-5
+#: Peak search: the bracket grows by the golden ratio at most this many times
+PEAK_EXPANSIONS = 12
+#: Peak search: stop when the bracket is narrower than this (relative frequency)
+PEAK_XTOL = 1e-9
+#: Tolerances (Newton, GMRES) of the peak search's solves. Tighter than hbm's strict pair: at
+#: Newton 1e-9 two solves at the same ω from different warm starts gave amplitudes 2.5e-8 apart
+#: (relative, v2's top-level peak of the quick model, residuals 4e-10 and 1e-11), more than a
+#: comparison of amplitudes near a maximum can tolerate; one more Newton iteration (quadratic)
+#: reaches ≈ 1e-15 there.
+PEAK_TOLERANCES = (1e-12, 1e-11)
+#: Peak search: half-width of the three-point stencil of the smooth top's vertex, relative
+PEAK_STENCIL = 1e-5
+#: Peak search: a vertex at most this much below the golden section's maximum (relative) is taken
+PEAK_SMOOTH = 1e-10
+#: the golden section's interior ratio, (3 − √5)/2
+_GOLD = 0.3819660112501051
+#: the golden ratio, the growth of the bracket
+_PHI = 1.618033988749895
 
 
-def _refine_peak(hb, force: np.ndarray, dof: int, sol, iterations: int = 8):
-    """The resonance peak as a root of dX/dω, solved to a tolerance rather than sampled.
+def _refine_peak(hb, force: np.ndarray, dof: int, sol, max_solves: int = 80):
+    """The resonance peak: the largest amplitude of the branch near ``sol``, located by a
+    golden-section search on solves at tight tolerances (``PEAK_TOLERANCES``).
 
-    The parabolic polish interpolates between solutions computed at the sweep's (fast) Newton
-    tolerance, and where it stops depends on the branch points the continuation happened to
-    take, so a peak moved by up to 7e-5 when only the order of floating-point operations
-    changed. Here each iteration solves at hbm's strict tolerances at ω and ω(1 ± h) and takes
-    the Newton step ω ← ω − h·ω·(X₊ − X₋) / (2(X₊ − 2X₀ + X₋)) on the central-difference
-    derivative. Its fixed point, X(ω(1+h)) = X(ω(1−h)), depends on the peak alone: with
-    h = 1e-5 it lies within about h²·X‴/(6X″) (≈ 1e-8 relative for ζ ≥ 1e-3) of the true
-    maximum; the strict solves' noise (≈ 1e-8 relative in X on the resonator) makes the last
-    steps wander by ≈ 1.5e-8 relative. h shrinks from 1e-4 to 1e-5 with the step, so a start
-    far from the peak still converges.
+    A bracket a < m < b with X(m) ≥ X(a), X(b) is found around the polished peak (first
+    half-width ``PEAK_BRACKET``, grown by the golden ratio towards the larger end) and narrowed by
+    golden sections to a relative width ``PEAK_XTOL``; the solution at its middle is returned.
+    Where X is unimodal in the bracket, the result is the maximum whatever the start, to the
+    bracket's width — also where the maximum is a corner of the sampled friction law, which the
+    top-level peaks of the quick model are (slopes of +3 and −3 in dX/X over dω/ω, rounded over
+    only ≈ 1e-6 relative). The previous refinement, Newton steps on a central difference of X
+    with a stencil of 1e-4 … 1e-5, stopped where its stencil was not concave or a stencil solve
+    failed (below the fold under a softening peak) and returned the point it stood on: two
+    models 1e-10 apart gave v2's top-level peak 2.1e-5 apart in frequency and 1.2e-4 in amplitude.
 
-    A strict solve that fails is repeated at the sweep's tolerances: it used to end the
-    refinement and return the start, the polished point, which depends on the path (one e2e peak
-    was 1.9e-5 off in one run of two). Where the stencil is not concave (a corner of the sampled
-    friction law) the best of its three points is kept.
+    Every solve starts from the best solution so far, so the search stays on the branch of the
+    peak; one that fails at the tight tolerances is repeated at hbm's strict and then at the
+    sweep's tolerances, and from a looser solution once more at the tight ones (when that fails
+    too, the looser amplitude is used: at 1e-9 it may be off by ≈ 2.5e-8 on the resonator). A
+    point where all fail counts as one below the peak (beyond a fold): a bracket end.
 
     Args:
         hb: the HarmonicBalance of the curve (its tolerances are restored on return).
         force: (n,) excitation amplitude, N.
         dof: response DOF.
         sol: the polished peak Solution (start).
-        iterations: Newton iterations at most.
+        max_solves: solves at most (about 25 are needed from the first bracket).
 
     Returns:
-        the Solution at the refined peak (the best stencil point where the stencil is not
-        concave; the last iterate, or ``sol``, if a solve fails at both tolerances).
+        the Solution at the peak (``sol`` itself if no solve succeeds at its frequency).
     """
-    fast = hb.tol, hb.krylov_tol
-    hb.tol, hb.krylov_tol = SWEEP_TOLERANCES[1]
-    best = sol
+    own = hb.tol, hb.krylov_tol
+    ladder = (PEAK_TOLERANCES, SWEEP_TOLERANCES[1], own)
+    count = [0]
 
-    def solve(w: float, guess):
+    def attempt(w: float, guess, tols):
+        hb.tol, hb.krylov_tol = tols
         try:
             return hb.solve(w, force, guess=guess)
         except ConvergenceError:
-            hb.tol, hb.krylov_tol = fast
-            try:
-                return hb.solve(w, force, guess=guess)
-            finally:
-                hb.tol, hb.krylov_tol = SWEEP_TOLERANCES[1]
+            return None
+
+    def amp(w: float, guess):
+        """(X, Solution) at w, or (-inf, None) when no solve converges."""
+        count[0] += 1
+        s = attempt(w, guess, PEAK_TOLERANCES)
+        for tols in ladder[1:]:
+            if s is not None:
+                break
+            s = attempt(w, guess, tols)
+            if s is not None:      # tight again from there, else the looser solution
+                s = attempt(w, s, PEAK_TOLERANCES) or s
+        return (-np.inf, None) if s is None else (s.amplitude(dof), s)
+
     try:
-        w = float(sol.omega)
-        best = solve(w, sol)
-        h = PEAK_STENCIL[0]
-        for _ in range(iterations):
-            lo = solve(w * (1 - h), best)
-            hi = solve(w * (1 + h), best)
-            x0, xl, xh = best.amplitude(dof), lo.amplitude(dof), hi.amplitude(dof)
-            curv = xh - 2 * x0 + xl
-            if not curv < 0:         # not concave at this scale: keep the best of the three
-                best = max((best, lo, hi), key=lambda s: s.amplitude(dof))
+        wm = float(sol.omega)
+        xm, sm = amp(wm, sol)
+        if sm is None:
+            return sol
+        d = PEAK_BRACKET * wm
+        (xa, sa), (xb, sb) = amp(wm - d, sm), amp(wm + d, sm)
+        wa, wb = wm - d, wm + d
+        # grow the bracket towards the larger end until the middle is the largest
+        for _ in range(PEAK_EXPANSIONS):
+            if xm >= xa and xm >= xb:
                 break
-            # a Newton step beyond the stencil is trusted only up to twice its width
-            step = float(np.clip(-0.5 * h * w * (xh - xl) / curv, -2 * h * w, 2 * h * w))
-            w += step
-            best = solve(w, hi if step > 0 else lo)
-            if abs(step) <= PEAK_FTOL * w:
-                break
-            h = float(np.clip(abs(step) / w, PEAK_STENCIL[1], PEAK_STENCIL[0]))
-    except ConvergenceError:
-        pass
+            if xa > xb:      # move left: b <- m <- a, a further out
+                wb, xb, sb, wm, xm, sm = wm, xm, sm, wa, xa, sa
+                wa = wm - _PHI * (wb - wm)
+                xa, sa = amp(wa, sm)
+            else:
+                wa, xa, sa, wm, xm, sm = wm, xm, sm, wb, xb, sb
+                wb = wm + _PHI * (wm - wa)
+                xb, sb = amp(wb, sm)
+        else:
+            if not (xm >= xa and xm >= xb):
+                return max(((xa, sa), (xm, sm), (xb, sb)), key=lambda p: p[0])[1]
+        # golden sections: probe the larger side; a probe no larger than the middle is an end
+        while wb - wa > PEAK_XTOL * wm and count[0] < max_solves:
+            left = wm - wa > wb - wm
+            wx = wm - _GOLD * (wm - wa) if left else wm + _GOLD * (wb - wm)
+            xx, sx = amp(wx, sm)
+            if xx > xm:
+                if left:
+                    wb = wm
+                else:
+                    wa = wm
+                wm, xm, sm = wx, xx, sx
+            elif left:
+                wa = wx
+            else:
+                wb = wx
+        return _smooth_vertex(amp, wm, xm, sm)
     finally:
-        hb.tol, hb.krylov_tol = fast
-    return best
+        hb.tol, hb.krylov_tol = own
+
+
+def _smooth_vertex(amp, wm: float, xm: float, sm):
+    """The golden section's maximum (wm, xm, sm), or the vertex of the parabola through
+    X(wm(1 − h)), X(wm), X(wm(1 + h)) (h = ``PEAK_STENCIL``) when the top is smooth at that scale.
+
+    On a smooth top the golden section is limited by the amplitude's noise: with noise ε and
+    X ≈ X₀(1 − c δ²) (δ relative) it stops within ≈ √(ε/c) of the maximum. With the tight
+    solves' ε ≈ 3e-12 that is 4e-9 at the quick model's baseline peak at the middle level
+    (c ≈ 1.9e5) but 1.2e-7 on a flat top like the one-element test's (c ≈ 200). The
+    parabola's vertex is far less sensitive (≈ ε/(c h)) and, to first order, does not depend on
+    where in that range wm lies (a cubic term shifts it by h²X‴/(6X″) whatever wm). It is
+    taken only when it is as high as the maximum, to ``PEAK_SMOOTH`` (≈ 30 ε): at a corner of
+    slopes a and −b it lies ≈ h(a − b)/(2(a + b)) off the corner and well below it, and on a
+    top that is not a parabola over ±h it is lower too (the baseline peak above: its vertex
+    1.2e-6 off and 2.4e-7 below, so the golden section's maximum is kept).
+    """
+    h = PEAK_STENCIL * wm
+    (xl, sl), (xr, sr) = amp(wm - h, sm), amp(wm + h, sm)
+    curv = xl - 2 * xm + xr
+    if not (curv < 0 and np.isfinite(xl) and np.isfinite(xr)):
+        return sm
+    wv = wm - 0.5 * h * (xr - xl) / curv
+    if not abs(wv - wm) < h:
+        return sm
+    xv, sv = amp(wv, sm)
+    return sv if xv >= xm * (1 - PEAK_SMOOTH) else sm

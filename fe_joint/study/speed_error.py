@@ -13,7 +13,10 @@ models the ``speed`` stage builds at coarser lap meshes; the FE side of mesh con
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -21,27 +24,67 @@ from . import contact as ms
 from .frf import SweepSettings, frf
 
 
-def bem_grid(rm, case, grids=(64, 128, 256, 512)) -> list[dict]:
-    """Real contact area and time of the global rough solve (Rq of the v-configurations) vs grid."""
-    rows = []
+def bem_row(rm, case, n: int) -> dict:
+    """Real contact area and time of the global rough solve (Rq of the v-configurations) on an
+    n × n grid (errors are added by :func:`bem_errors`)."""
     r = case.roughness
-    for n in grids:
-        rr = dataclasses.replace(r, grid=n)
-        setup = ms.interface_setup(rm, case.geometry, case.material, rr)
-        t0 = time.perf_counter()
-        sc = ms.rough_contact(setup, r.v_rq_um, r.corr_length, r.seed, stiffness=False)
-        rows.append({"grid": f"{n}²", "contact [%]": 100 * sc.contact_fraction,
-                     "iterations": sc.iterations, "time [s]": time.perf_counter() - t0})
+    setup = ms.interface_setup(rm, case.geometry, case.material, dataclasses.replace(r, grid=n))
+    t0 = time.perf_counter()
+    sc = ms.rough_contact(setup, r.v_rq_um, r.corr_length, r.seed, stiffness=False)
+    return {"grid": f"{n}²", "contact [%]": 100 * sc.contact_fraction,
+            "iterations": sc.iterations, "time [s]": time.perf_counter() - t0}
+
+
+def bem_errors(rows: list[dict]) -> list[dict]:
+    """Add each row's contact-area error against the last (finest) row, %."""
     ref = rows[-1]["contact [%]"]
     for row in rows:
         row["error vs finest [%]"] = 100 * abs(row["contact [%]"] - ref) / ref
     return rows
 
 
+def bem_grid(rm, case, grids=(64, 128, 256, 512)) -> list[dict]:
+    """Real contact area and time of the global rough solve (Rq of the v-configurations) vs grid."""
+    return bem_errors([bem_row(rm, case, n) for n in grids])
+
+
 #: the band of the speed-against-error sweeps, as fractions of the study curve's peak: the sweep
 #: starts below the fold of a softening peak (where the response is single-valued) and passes
 #: through the peak, so each row measures the FRF peak itself, not a cold start's lower branch
 PEAK_BAND = (0.99, 1.005)
+
+
+def hbm_row(rm, joint, level: float, settings: SweepSettings, f_peak_hz: float, H: int,
+            nt: int) -> dict:
+    """The FRF peak (frequency, amplitude) and its sweep's time with H harmonics and nt AFT
+    samples, by a sweep through :data:`PEAK_BAND` × ``f_peak_hz``; a sweep that fails gives a
+    row that says so (the run's results are not affected)."""
+    from hbm import ConvergenceError
+    st = dataclasses.replace(settings, harmonics=H, samples=nt, band=PEAK_BAND)
+    out = {"harmonics": H, "samples": nt}
+    t0 = time.perf_counter()
+    try:
+        cr = frf(rm, joint, level, f_peak_hz, st)
+    except ConvergenceError as e:
+        return {**out, "peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
+                "time [s]": time.perf_counter() - t0, "points": 0, "note": f"not found ({e})"}
+    return {**out, "peak [Hz]": cr.peak_hz, "amplitude [µm]": 1e3 * cr.peak_amplitude,
+            "time [s]": time.perf_counter() - t0, "points": cr.n_points}
+
+
+#: titles of the HBM tables (the report reads them)
+HARMONICS_TABLE = "harmonics (baseline, middle level, FRF peak by a sweep through it)"
+SAMPLES_TABLE = "AFT samples (baseline, middle level, FRF peak by a sweep through it)"
+MESH_TABLE = ("interface elements (lap mesh size; baseline, middle level, FRF peak by a sweep "
+              "through it)")
+
+
+def knob_grid(harmonics=(1, 3, 5, 7), samples=(16, 32, 64, 128, 256),
+              h_fixed: int = 3) -> tuple[list[tuple[int, int]], list[tuple[int, int]]]:
+    """The (H, n_t) rows of the harmonics table (n_t fine enough for the largest H) and of the
+    samples table (H = ``h_fixed``)."""
+    nt_h = max(256, 4 * (2 * max(harmonics) + 1))
+    return [(H, nt_h) for H in harmonics], [(h_fixed, nt) for nt in samples]
 
 
 def hbm_knobs(rm, joint, level: float, settings: SweepSettings, f_peak_hz: float,
@@ -57,25 +100,11 @@ def hbm_knobs(rm, joint, level: float, settings: SweepSettings, f_peak_hz: float
         {table title: rows}, each row with H, samples, peak [Hz], amplitude [µm], time [s],
         points, and its errors against the finest row.
     """
-    from hbm import ConvergenceError
-
-    def row(H, nt):
-        st = dataclasses.replace(settings, harmonics=H, samples=nt, band=PEAK_BAND)
-        out = {"harmonics": H, "samples": nt}
-        t0 = time.perf_counter()
-        try:
-            cr = frf(rm, joint, level, f_peak_hz, st)
-        except ConvergenceError as e:   # a table row says so; the run's results are not affected
-            return {**out, "peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
-                    "time [s]": time.perf_counter() - t0, "points": 0, "note": f"not found ({e})"}
-        return {**out, "peak [Hz]": cr.peak_hz, "amplitude [µm]": 1e3 * cr.peak_amplitude,
-                "time [s]": time.perf_counter() - t0, "points": cr.n_points}
-
-    nt_h = max(256, 4 * (2 * max(harmonics) + 1))
-    hr = _errors([row(H, nt_h) for H in harmonics], f"H={harmonics[-1]}")
-    sr = _errors([row(h_fixed, nt) for nt in samples], "finest")
-    return {"harmonics (baseline, middle level, FRF peak by a sweep through it)": hr,
-            "AFT samples (baseline, middle level, FRF peak by a sweep through it)": sr}
+    hk, sk = knob_grid(harmonics, samples, h_fixed)
+    hr = _errors([hbm_row(rm, joint, level, settings, f_peak_hz, H, nt) for H, nt in hk],
+                 f"H={harmonics[-1]}")
+    sr = _errors([hbm_row(rm, joint, level, settings, f_peak_hz, H, nt) for H, nt in sk], "finest")
+    return {HARMONICS_TABLE: hr, SAMPLES_TABLE: sr}
 
 
 #: lap mesh sizes of the element-count table, as multiples of the case's (coarser only: a finer
@@ -88,9 +117,50 @@ def lap_mesh_sizes(lap_mesh_size: float) -> list[float]:
     return [round(f * lap_mesh_size, 1) for f in LAP_MESH_FACTORS]
 
 
+def mesh_row(model: tuple, f_stuck_case: float, level: float, settings: SweepSettings,
+             f_peak_hz: float) -> dict:
+    """One row of the element-count table (errors are added by :func:`mesh_errors`).
+
+    Args:
+        model: (lap mesh size mm, ReducedModel, FE seconds, baseline JointModel on it).
+        f_stuck_case: the stuck frequency of the case's own mesh, Hz (centres the sweep).
+        level: N; settings: the study's sweep settings (band replaced); f_peak_hz: the study's
+            peak at that level, Hz, scaled by this model's stuck frequency over the case's.
+    Returns:
+        lap mesh size, elements, closed pairs, reduced DOFs, stuck and peak frequencies, peak
+        amplitude, FE and HBM times, points.
+    """
+    from hbm import ConvergenceError
+
+    from ..model.joint import stuck_modes
+    size, rm, fe_s, joint = model
+    f_st = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency
+    out = {"lap mesh [mm]": size, "elements": int(rm.n_pairs),
+           "closed": int(np.sum(np.asarray(rm.preload_status) != 0)), "reduced DOFs": int(rm.n_dofs),
+           "stuck [Hz]": f_st, "FE time [s]": fe_s}
+    t0 = time.perf_counter()
+    try:
+        cr = frf(rm, joint, level, f_peak_hz * f_st / f_stuck_case,
+                 dataclasses.replace(settings, band=PEAK_BAND))
+        out.update({"peak [Hz]": cr.peak_hz, "amplitude [µm]": 1e3 * cr.peak_amplitude,
+                    "HBM time [s]": time.perf_counter() - t0, "points": cr.n_points})
+    except ConvergenceError as e:
+        out.update({"peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
+                    "HBM time [s]": time.perf_counter() - t0, "points": 0, "note": f"not found ({e})"})
+    return out
+
+
+def mesh_errors(rows: list[dict]) -> list[dict]:
+    """Add the stuck, peak-frequency and amplitude errors against the last row (the case's mesh)."""
+    f0 = rows[-1]["stuck [Hz]"]
+    for r in rows:
+        r["stuck error vs case mesh [%]"] = 100 * abs(r["stuck [Hz]"] - f0) / f0
+    return _errors(rows, "case mesh")
+
+
 def mesh_rows(models: list, level: float, settings: SweepSettings, f_peak_hz: float) -> list[dict]:
     """The baseline's stuck frequency and FRF peak at one level against the interface element
-    count.
+    count (:func:`mesh_row` for each model).
 
     Args:
         models: [(lap mesh size mm, ReducedModel, FE seconds, baseline JointModel on it)], the
@@ -99,33 +169,12 @@ def mesh_rows(models: list, level: float, settings: SweepSettings, f_peak_hz: fl
         f_peak_hz: the study's peak at that level (its mesh), Hz; each model's sweep is centred
             on it scaled by the model's stuck frequency against the study's.
     Returns:
-        rows with lap mesh size, elements (interface pairs), closed at preload, reduced DOFs,
-        stuck and peak frequencies, peak amplitude, FE and HBM times, errors against the last.
+        rows of :func:`mesh_row`, with the errors against the last.
     """
-    from hbm import ConvergenceError
-
     from ..model.joint import stuck_modes
-    stuck = [(j, stuck_modes(rm.K, rm.M, rm.pair_dofs, j).frequency) for _, rm, _, j in models]
-    rows = []
-    for (size, rm, fe_s, _), (joint, f_st) in zip(models, stuck):
-        f_centre = f_peak_hz * f_st / stuck[-1][1]
-        st = dataclasses.replace(settings, band=PEAK_BAND)
-        out = {"lap mesh [mm]": size, "elements": int(rm.n_pairs),
-               "closed": int(np.sum(np.asarray(rm.preload_status) != 0)), "reduced DOFs": int(rm.n_dofs),
-               "stuck [Hz]": f_st, "FE time [s]": fe_s}
-        t0 = time.perf_counter()
-        try:
-            cr = frf(rm, joint, level, f_centre, st)
-            out.update({"peak [Hz]": cr.peak_hz, "amplitude [µm]": 1e3 * cr.peak_amplitude,
-                        "HBM time [s]": time.perf_counter() - t0, "points": cr.n_points})
-        except ConvergenceError as e:
-            out.update({"peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
-                        "HBM time [s]": time.perf_counter() - t0, "points": 0, "note": f"not found ({e})"})
-        rows.append(out)
-    f0 = rows[-1]["stuck [Hz]"]
-    for r in rows:
-        r["stuck error vs case mesh [%]"] = 100 * abs(r["stuck [Hz]"] - f0) / f0
-    return _errors(rows, "case mesh")
+    _, rm, _, joint = models[-1]
+    f_case = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency
+    return mesh_errors([mesh_row(m, f_case, level, settings, f_peak_hz) for m in models])
 
 
 def _errors(rows: list[dict], ref_name: str) -> list[dict]:
@@ -135,3 +184,98 @@ def _errors(rows: list[dict], ref_name: str) -> list[dict]:
         r[f"f error vs {ref_name} [%]"] = 100 * abs(r["peak [Hz]"] - f0) / f0
         r[f"amplitude error vs {ref_name} [%]"] = 100 * abs(r["amplitude [µm]"] - a0) / a0
     return rows
+
+
+# ----------------------------------------------------------------------------- the stage's jobs
+@dataclass(frozen=True)
+class SpeedJob:
+    """One row of a speed-against-error table, a job of the MPI queue (``study.queue``).
+
+    Attributes:
+        table: "bem", "harmonics", "samples" or "mesh".
+        index: the row's place in its table.
+        grid: BEM grid n (table "bem").
+        harmonics, samples: H and n_t (tables "harmonics" and "samples").
+        model: index into the stage's reduced models, the case's own last (table "mesh").
+    """
+    table: str
+    index: int
+    grid: int = 0
+    harmonics: int = 0
+    samples: int = 0
+    model: int = -1
+
+    @property
+    def name(self) -> str:
+        return f"{self.table}-{self.index}"
+
+
+def speed_jobs(grids, knobs: tuple[list, list] | None, n_models: int,
+               study_knobs: tuple[int, int] = (3, 128)) -> list[SpeedJob]:
+    """Every row of the stage as a job, the costly ones first (the queue deals them in order).
+
+    Args:
+        grids: BEM grid sizes; knobs: :func:`knob_grid`'s (H, n_t) rows, None without the HBM
+            tables; n_models: reduced models of the element-count table (0: no table), the
+            case's own last; study_knobs: the study's (H, n_t), those of the element-count rows.
+    """
+    jobs = [SpeedJob("bem", i, grid=n) for i, n in enumerate(grids)]
+    if knobs is not None:
+        jobs += [SpeedJob("harmonics", i, harmonics=H, samples=nt) for i, (H, nt) in enumerate(knobs[0])]
+        jobs += [SpeedJob("samples", i, harmonics=H, samples=nt) for i, (H, nt) in enumerate(knobs[1])]
+    jobs += [SpeedJob("mesh", i, model=i) for i in range(n_models)]
+    # a sweep's cost grows like (2H + 1)·n_t (the march) and the element count (a coarser mesh
+    # has fewer elements); the BEM rows (seconds) go last
+    H, nt = study_knobs
+
+    def cost(j: SpeedJob) -> float:
+        if j.table == "bem":
+            return j.grid ** 2 / 1e6
+        if j.table == "mesh":
+            return (2 * H + 1) * nt * (1 + j.model) / max(n_models, 1)
+        return (2 * j.harmonics + 1) * j.samples
+    return sorted(jobs, key=lambda j: -cost(j))
+
+
+def assemble_tables(jobs: list[SpeedJob], rows: dict[str, dict], h_ref: int) -> dict:
+    """The stage's tables from its rows (any order of completion gives the same tables).
+
+    Args:
+        jobs: :func:`speed_jobs`; rows: {job name: row}; h_ref: the largest H (the harmonics
+            table's reference).
+    Returns:
+        {table title: rows with their errors}; the BEM title is added by the caller.
+    """
+    by = {}
+    for j in sorted(jobs, key=lambda j: (j.table, j.index)):
+        by.setdefault(j.table, []).append(dict(rows[j.name]))
+    out = {}
+    if "bem" in by:
+        out["bem"] = bem_errors(by["bem"])
+    if "harmonics" in by:
+        out[HARMONICS_TABLE] = _errors(by["harmonics"], f"H={h_ref}")
+        out[SAMPLES_TABLE] = _errors(by["samples"], "finest")
+    if "mesh" in by:
+        out[MESH_TABLE] = mesh_errors(by["mesh"])
+    return out
+
+
+def write_row(folder: Path, job: SpeedJob, row: dict, key: str) -> None:
+    """A finished row (rank 0), with the stage key it was computed under."""
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / f"{job.name}.json.tmp"
+    tmp.write_text(json.dumps({"key": key, "job": dataclasses.asdict(job), "row": row}, default=float))
+    tmp.replace(folder / f"{job.name}.json")
+
+
+def read_rows(folder: Path, jobs: list[SpeedJob], key: str) -> dict[str, dict]:
+    """The rows on disk computed for these jobs under ``key`` (others are ignored)."""
+    out = {}
+    for j in jobs:
+        try:
+            m = json.loads((folder / f"{j.name}.json").read_text())
+        except (OSError, ValueError):
+            continue
+        if isinstance(m, dict) and m.get("key") == key and m.get("job") == dataclasses.asdict(j):
+            out[j.name] = m["row"]
+    return out
