@@ -504,6 +504,11 @@ def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40
         while not stop:
             ac, Uc, wc, xc = hist[-1]
             a_try = ac * (at / ac) ** (0.5 ** halvings)
+            if abs(a_try / at - 1) < 1e-12:
+                # a halved step from an ulp below the target rounds to the current point: a
+                # second point at the same amplitude made the next secant inf (the unit
+                # oscillator's backbone stopped so on one machine, not on another)
+                a_try = at
             if len(hist) > 1:
                 ap, Up, wp, xp = hist[-2]
                 rho = np.log(a_try / ac) / np.log(ac / ap)

@@ -293,3 +293,17 @@ def test_report_without_fe_packages(report, tmp_path):
     assert "k_eq" in json.loads(res.stdout.splitlines()[-1])
     assert all((run / "figures" / f"{n}.png").exists() for n in FIGURES)
     assert (run / "summary.json").read_text() == (report[0] / "summary.json").read_text()
+
+
+def test_texts_differ_by_their_printed_numbers() -> None:
+    """compare.differences: two texts that differ only in a printed number differ by that
+    number's relative difference; texts whose words differ, by inf."""
+    import math
+
+    from fe_joint.report.compare import differences
+    a = {"f": ["L2 baseline 1.874e-03 / 602 µm vs 824.4 µm", "agree"]}
+    b = {"f": ["L2 baseline 1.874e-03 / 601.9 µm vs 824.4 µm", "disagree"]}
+    (r0, p0, _, _), (r1, p1, _, _) = differences(a, b)
+    assert (p0, p1) == ("/f[0]", "/f[1]")
+    assert r0 == pytest.approx(0.1 / 602, rel=1e-12) and math.isinf(r1)
+    assert differences({"t": "X 1.5e-3 mm"}, {"t": "X 1.5e-3 µm"})[0][0] == math.inf

@@ -52,8 +52,17 @@ DATA = Path(__file__).parent / "data"
 #: frequencies: PETSc/gmsh are not bitwise repeatable run to run), which moves the peaks by ≤ 1e-5,
 #: the v3 history and energies by ≤ 1e-3, and the discrete counts (continuation points, elements
 #: at the slip threshold) and round-off diagnostics arbitrarily: those are not compared.
+#: Recorded on one machine, compared on another (CI): a different CPU changes the round-off
+#: again, which the tolerances below cover, except at a peak on a fold: the quick model's
+#: baseline top-level peak lies where X(ω) has two sheets 1.3e-4 apart, and the reference
+#: recorded in session 3 held the upper one, this machine and CI the lower one (2.5e-8 apart).
 REF_RTOL = 1e-6
-REF_TOLERANCES = (  # backbones: checked by their own tests below (SNMS vs forced, energy balance,
+REF_TOLERANCES = (  # texts: their numbers, printed to 3–4 digits, are compared at their source
+                  ("/findings", 1e-2),
+                  # interpolated on the backbones (whose points are not compared: below), and the
+                  # k_t definitions on the v3 peaks' loops: as the peaks
+                  ("/like_for_like/", 1e-4), ("/stiffness_definitions/loops", 1e-4),
+                  # backbones: checked by their own tests below (SNMS vs forced, energy balance,
                   # linear limit); where a stalled continuation stops is a knife edge
                   ("/backbones/", None),
                   # a spread over seeds is a difference of nearly equal frequencies: the FE
