@@ -18,7 +18,15 @@ import signal
 import sys
 from pathlib import Path
 
-from .case import PRESETS, load_case, load_case_with_sources
+# one BLAS thread per process (one rank per core, as scripts/run and scripts/test set it), unless
+# the user chose otherwise; only effective before numpy loads OpenBLAS, hence here. Run serially
+# with 2 BLAS threads on the 2 cores, the quick model's v2 top-level curve took 914 s instead of
+# 31 s and rounded differently (its peak 6.6e-6 off the 1-thread value, which 1 and 2 ranks
+# agree on to 2e-8)
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+from .case import PRESETS, load_case, load_case_with_sources  # noqa: E402
 from .errors import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_TERMINATED, CaseError
 from .logs import NumericWarnings, configure_logging
 from .pipeline.runner import STAGES

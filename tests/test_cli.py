@@ -352,3 +352,18 @@ def test_scripts_run_on_two_ranks_prints_one_line_for_bad_input(tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "missing.toml" in lines[0], r.stderr
     assert not out.exists()
+
+
+def test_one_blas_thread_unless_the_user_sets_it() -> None:
+    """Importing the command line sets one BLAS thread per process where the user set none
+    (scripts/run's and scripts/test's choice, now also for fe-joint run alone), and keeps a
+    value the user set."""
+    import subprocess
+    code = ("import os, sys\nimport fe_joint.cli\n"
+            "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['OMP_NUM_THREADS'])")
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["1", "1"]
+    env["OPENBLAS_NUM_THREADS"] = "2"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["2", "1"]

@@ -289,3 +289,39 @@ def test_a_march_that_does_not_close_is_a_rejected_trial_of_the_backbone():
     # the same points to the Newton tolerance (different iterates reach them)
     assert np.allclose(bb.omega, ref.omega, rtol=1e-8, atol=0)
     assert np.allclose(bb.zeta, ref.zeta, rtol=1e-6, atol=0)
+
+
+def test_a_corner_restart_onto_a_far_point_is_refused(monkeypatch):
+    """A corner restart is held to the step bounds of a plain step (frequency within
+    3 max_domega, amplitude within max_damp): once, a failed corrector is followed by a
+    'restart' that lands on a converged point beyond the band end (as v2's top-level sweep of
+    the quick model did on 2 ranks next to its peak, which cut 42 points off the curve). The
+    step is halved instead, and the curve is the one traced without the fault."""
+    from hbm import continuation as cn
+    s = LinearStructure([[1.0]], [[1.0]], [[0.1]])
+    c = FrictionContacts(np.array([[[-1, -1, 0], [-1, -1, -1]]]), kt=1.0, kn=3.0, mu=0.5, n0=0.1)
+    hb = HarmonicBalance(s, c, harmonics=3, samples=64)
+    f = np.array([0.1])
+    ref = hb.frf(0.6, 2.6, f, dof=0, ds_max=0.1, stability="none")
+    far = hb.solve(2.7, f)
+    real_correct, calls = cn._correct, {"n": 0}
+
+    def failing_once(hb_, force, sc, Yp, t, max_corrector):
+        calls["n"] += 1
+        corr = real_correct(hb_, force, sc, Yp, t, max_corrector)
+        return corr._replace(ok=False) if calls["n"] == 20 else corr
+
+    def restart_far(self, Y, Yp, failed):
+        U = self.hb.from_contact(far.contact)
+        return cn._Correction(True, U, 2.7, cn._evaluate(self.hb, self.force, U, 2.7), 1), True
+    monkeypatch.setattr(cn, "_correct", failing_once)
+    monkeypatch.setattr(cn._Branch, "_corner_restart", restart_far)
+    frf = hb.frf(0.6, 2.6, f, dof=0, ds_max=0.1, stability="none")
+    assert calls["n"] > 20
+    cap = ContinuationSettings(ds_max=0.1).frequency_cap(0.6, 2.6)
+    assert np.abs(np.diff(frf.omega)).max() <= 3 * cap
+    # the whole curve (its points placed differently after the halved step): both folds, the
+    # same end, the top to the spacing of the points
+    assert abs(frf.omega[-1] - 2.6) < 1e-12 and len(frf.turning_points) >= 2
+    assert abs(len(frf.omega) - len(ref.omega)) <= 3
+    assert np.isclose(frf.amplitude.max(), ref.amplitude.max(), rtol=1e-2)
