@@ -325,3 +325,25 @@ def test_a_corner_restart_onto_a_far_point_is_refused(monkeypatch):
     assert abs(frf.omega[-1] - 2.6) < 1e-12 and len(frf.turning_points) >= 2
     assert abs(len(frf.omega) - len(ref.omega)) <= 3
     assert np.isclose(frf.amplitude.max(), ref.amplitude.max(), rtol=1e-2)
+
+
+def test_a_point_on_the_branch_already_traced_is_a_retrace():
+    """``_Branch._retraces``: a corrected point on a segment of the branch before the current
+    point is a retrace (the step went back); a point ahead, and one where the branch turns back
+    in frequency but goes on in the response (a fold's Z), is not."""
+    from types import SimpleNamespace
+
+    from hbm import continuation as cn
+    # a branch along U from (U, w) = (0, 1) to (4, 1.4), then current at (5, 1.5)
+    pts = [(float(u), 1.0 + 0.1 * u) for u in range(6)]
+    sols = [SimpleNamespace(contact=np.array([[u]]), omega=w) for u, w in pts]
+    br = SimpleNamespace(sols=sols, sc=cn._Scaling(1.0, 1.0, (1, 1)),
+                         hb=SimpleNamespace(from_contact=lambda c: np.asarray(c, float)))
+
+    def corr(u, w):
+        return cn._Correction(True, np.array([[u]]), w, None, 1)
+    retraces = lambda c: cn._Branch._retraces(br, c)     # noqa: E731
+    assert retraces(corr(2.5, 1.25)) and retraces(corr(1.02, 1.1))
+    assert not retraces(corr(6.0, 1.6))                  # ahead
+    assert not retraces(corr(6.0, 1.45))                 # back in ω, on in U: a fold
+    assert not retraces(corr(4.5, 1.45))                 # the current segment itself is not checked
