@@ -22,13 +22,12 @@ Linear solver (what we chose and why)
 * k large: the dense 3 k n_H system (7140 for 340 elements, H = 3; ~7 s per LU here) is never
   factorized. GMRES runs on it matrix-free (one receptance product per iteration: modal low rank
   + the dense static residual block), preconditioned by ``preconditioner.
-  HarmonicBlockPreconditioner``: the mean harmonic's block solved exactly and coupled to the
-  vibration by one Gauss-Seidel sweep, each dynamic harmonic with the elements' complex
-  stiffness (one complex LU of I + R K_h and a rank-m Woodbury correction). On the quick
-  model's strongly slipping top-level sweep that is 26 GMRES iterations per solve where the
-  harmonic-averaged preconditioner it replaced needed 56. A preconditioner is reused while the
-  nonlinear set stays the same and its iteration count does not grow (``_PreconditionerCache``):
-  71 set-ups for 586 solves on that sweep.
+  MeanCoupledPreconditioner``: the harmonic-averaged Jacobian I + G_h k_bar on the dynamic
+  harmonics (one real LU of I + R k_bar and a rank-m Woodbury correction per harmonic), then the
+  mean harmonic's block solved exactly with the dynamic harmonics' force on its right-hand side.
+  A preconditioner is reused while the nonlinear set stays the same and GMRES does not slow
+  down (``_PreconditionerCache``). The module ``preconditioner`` says what was measured and
+  dropped.
 
 Newton uses a backtracking line search on ||R|| and raises ``ConvergenceError`` with the residual
 reached when it stalls.
@@ -47,7 +46,7 @@ from .continuation import ContinuationSettings, FRFResult, continue_frf
 from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 from .friction import FrictionContacts
-from .preconditioner import HarmonicBlockPreconditioner
+from .preconditioner import PRECONDITIONERS
 from .structure import LinearStructure, Receptance
 
 
@@ -208,11 +207,14 @@ class HarmonicBalance:
         dense_limit: largest reduced system size factorized directly (else GMRES).
         krylov_tol: relative GMRES tolerance of the reduced Newton systems (a Newton tolerance
             of 1e-7 needs no more than 1e-8; 1e-11 keeps Newton quadratic down to 1e-9).
+        preconditioner: GMRES preconditioner, "mean-coupled" (``preconditioner.
+            MeanCoupledPreconditioner``) or "averaged" (the previous one, the benchmark's peer).
     """
 
     def __init__(self, s: LinearStructure, c: FrictionContacts, harmonics: int = 3,
                  samples: int = 128, tol: float = 1e-9, max_iter: int = 40,
-                 dense_limit: int = 400, krylov_tol: float = 1e-11) -> None:
+                 dense_limit: int = 400, krylov_tol: float = 1e-11,
+                 preconditioner: str = "mean-coupled") -> None:
         if not isinstance(s, LinearStructure) or not isinstance(c, FrictionContacts):
             raise ValueError("HarmonicBalance(s, c): s must be a LinearStructure and c FrictionContacts")
         c.check_dofs(s.n)
@@ -220,6 +222,10 @@ class HarmonicBalance:
             raise ValueError(f"tol must be in (0, 1), got {tol}")
         if not (0 < krylov_tol < 1):
             raise ValueError(f"krylov_tol must be in (0, 1), got {krylov_tol}")
+        if preconditioner not in PRECONDITIONERS:
+            raise ValueError(f"preconditioner must be one of {'|'.join(PRECONDITIONERS)}, "
+                             f"got {preconditioner!r}")
+        self.preconditioner = preconditioner
         self.s, self.c = s, c
         self.fourier = Fourier(harmonics, samples)
         self.H, self.nH = self.fourier.H, self.fourier.nH
@@ -486,7 +492,7 @@ class HarmonicBalance:
             Psi = self.G.Psi[cn]
             Ls = [self.G.modal(h, omega) for h in range(self.H + 1)]
             pre = self._pre = _PreconditionerCache(self.G, nl, omega, R, Psi,
-                                                   HarmonicBlockPreconditioner(R, Psi, Ls, Dg))
+                                                   PRECONDITIONERS[self.preconditioner](R, Psi, Ls, Dg))
             self.stats["preconditioners"] += 1
         R, Psi = pre.R, pre.Psi
         Ls = [self.G.modal(h, omega) for h in range(self.H + 1)]

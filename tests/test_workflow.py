@@ -59,6 +59,11 @@ DATA = Path(__file__).parent / "data"
 REF_RTOL = 1e-6
 REF_TOLERANCES = (  # texts: their numbers, printed to 3–4 digits, are compared at their source
                   ("/findings", 1e-2),
+                  # the baseline's top-level peak: the two sheets 1.3e-4 apart (above); the
+                  # harmonic-block preconditioner of issue 16 (since replaced) landed on the
+                  # other one here, so either is accepted, nothing wider
+                  ("/peaks/baseline@L2/peak_", 3e-4), ("/peaks/baseline@L2/modal_amplitude", 3e-4),
+                  ("/peaks/baseline@L2/zeta_from_amplitude", 3e-4),
                   # interpolated on the backbones (whose points are not compared: below), and the
                   # k_t definitions on the v3 peaks' loops: as the peaks
                   ("/like_for_like/", 1e-4), ("/stiffness_definitions/loops", 1e-4),

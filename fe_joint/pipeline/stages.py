@@ -164,12 +164,14 @@ def _v3_outputs(folder, jobs: list, comm) -> dict:
     return comm.bcast(out, root=0) if comm is not None else out
 
 
-def stage_dynamics(ctx: StageContext) -> dict:
-    """FRFs of every configuration and level, the v3 fixed point and the Rq sweep (HBM).
+def study_inputs(ctx: StageContext) -> tuple[study.StudyInputs, dict]:
+    """What the dynamics stage's jobs read, from the fe and contact stages' artifacts: the
+    reduced model, interface, surfaces, the fixed configurations' joints (and the like-for-like
+    ones), their stuck frequencies and the excitation levels (``scripts/bench_preconditioner.py``
+    uses it on a finished run).
 
-    Every job is cached on its own (:mod:`fe_joint.study.jobs`): only the jobs whose inputs
-    changed, or whose files are missing or damaged, run. Warns where a result is suspect
-    (:mod:`.guards`) and rejects a level absurdly beyond gross slip (exit 2) before any job runs.
+    Returns:
+        (StudyInputs, the level choice's information from :func:`choose_levels`).
     """
     c = ctx.case
     rm = _reduced_model(ctx)
@@ -179,16 +181,29 @@ def stage_dynamics(ctx: StageContext) -> dict:
     joints.update(like_for_like_joints(joints, c.material.poisson))   # backbones only (item 8)
     f_lin = {name: stuck_modes(rm.K, rm.M, rm.pair_dofs, j).frequency for name, j in joints.items()}
     levels, level_info = choose_levels(rm, joints["baseline"], c)
+    inp = study.StudyInputs(rm=rm, setup=setup, surfaces=surfaces, kn_smooth=extra["kn_smooth"],
+                            joints=joints, levels=levels, f_lin=f_lin, case=c,
+                            settings=SweepSettings.from_case(c))
+    return inp, level_info
+
+
+def stage_dynamics(ctx: StageContext) -> dict:
+    """FRFs of every configuration and level, the v3 fixed point and the Rq sweep (HBM).
+
+    Every job is cached on its own (:mod:`fe_joint.study.jobs`): only the jobs whose inputs
+    changed, or whose files are missing or damaged, run. Warns where a result is suspect
+    (:mod:`.guards`) and rejects a level absurdly beyond gross slip (exit 2) before any job runs.
+    """
+    c = ctx.case
+    inp, level_info = study_inputs(ctx)
+    rm, levels, f_lin = inp.rm, inp.levels, inp.f_lin
     # before any work: a level absurdly beyond gross slip is an input error, one beyond it a warning
     ctx.warn(guards.gross_slip_guard(levels, level_info["macroslip"], c.contact.mu,
-                                     float(np.sum(joints["baseline"].n0))))
+                                     float(np.sum(inp.joints["baseline"].n0))))
     fe = ctx.summaries.get("fe") or {}
     if fe.get("full_elastic_hz"):
         ctx.warn(guards.cutoff_guard(fe["full_elastic_hz"], fe["reduced_elastic_hz"],
                                      c.reduction.cutoff_hz, c.dynamics.band[1] * max(f_lin.values())))
-    inp = study.StudyInputs(rm=rm, setup=setup, surfaces=surfaces, kn_smooth=extra["kn_smooth"],
-                            joints=joints, levels=levels, f_lin=f_lin, case=c,
-                            settings=SweepSettings.from_case(c))
     folder = ctx.path("dynamics")
     # the small-excitation check: far below first slip the FRF peak is the stuck linear mode
     inp_tiny = study.StudyInputs(**{**inp.__dict__, "levels": [level_info["first_slip"] * 1e-3]})
