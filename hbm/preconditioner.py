@@ -36,8 +36,9 @@ curves):
   with the explicit inverse, and the explicit complex inverse costs 180 ms at p = 603 and 840 ms
   at p = 1020 per harmonic: with H = 3 on the default model its set-up outweighed the 10-20 %
   fewer iterations than the mean-coupled one.
-* Kept: the mean-coupled one, 22-37 iterations (p = 345-603), each application about 1.6 times
-  the averaged one's (one product with the p x 2p mean inverse more), a set-up about 4 times.
+* Kept: the mean-coupled one, 22-37 iterations (p = 483-603), each application 1.5-1.8 times
+  the averaged one's (an LU solve and a product with G_0 more), a set-up about twice (39 against
+  20 ms at p = 603).
 * Reuse (``harmonic_balance._PreconditionerCache``) did more than either: on the same sweep a
   preconditioner built 17 solves earlier needed the same number of iterations as a fresh one,
   so it is kept while the nonlinear set is unchanged (535 set-ups became 71 on that curve).
