@@ -60,6 +60,11 @@ def main(argv=None) -> int:
     out = Path(a.run)
     ctx = StageContext(case=load_case(out / "case.toml"), out=out, comm=None, progress=False)
     inp, _ = stages.study_inputs(ctx)
+    for name in a.curves:       # one line naming the bad curve, exit 2, before any work
+        config, _, level = name.partition("@L")
+        if config not in inp.joints or not level.isdigit() or int(level) >= len(inp.levels):
+            p.error(f"--curves {name!r}: must be <configuration>@L<level> with a configuration of "
+                    f"{', '.join(sorted(inp.joints))} and a level index 0..{len(inp.levels) - 1}")
     print(f"\n### GMRES preconditioners on {out} (H = {inp.settings.harmonics}, "
           f"n_t = {inp.settings.samples}, levels {', '.join(f'{x:.3g}' for x in inp.levels)} N)\n")
     print("| curve | preconditioner | points | curve (s) | linear solves | GMRES iterations / solve "
