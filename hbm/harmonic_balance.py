@@ -487,16 +487,15 @@ class HarmonicBalance:
         reused from an earlier solve while that is worth it (``_PreconditionerCache``)."""
         nH, p = self.nH, cn.size
         P = nH * p
+        Ls = [self.G.modal(h, omega) for h in range(self.H + 1)]
         pre = self._pre
         if pre is None or not pre.usable(self.G, nl, omega):
             R = self.G.R[np.ix_(cn, cn)]
             Psi = self.G.Psi[cn]
-            Ls = [self.G.modal(h, omega) for h in range(self.H + 1)]
             pre = self._pre = _PreconditionerCache(self.G, nl, omega, R, Psi,
                                                    PRECONDITIONERS[self.preconditioner](R, Psi, Ls, Dg))
             self.stats["preconditioners"] += 1
         R, Psi = pre.R, pre.Psi
-        Ls = [self.G.modal(h, omega) for h in range(self.H + 1)]
 
         def matvec(x):
             ge = np.einsum("kxy,ky->kx", Dg, x[idx])
