@@ -244,14 +244,38 @@ def test_damaged_curve_and_new_level_rerun_only_their_jobs(run: Path, tmp_path: 
             assert b["peaks"][f"{head}@L{int(i) + 1}"]["peak_hz"] == p["peak_hz"], name
 
 
+def test_damaged_backbone_reruns_that_backbone_only(run: Path, tmp_path: Path) -> None:
+    """Backbones are cached by the key of their inputs, as curves are: a truncated backbone file
+    reruns the dynamics stage, which recomputes that backbone only (the others keep their
+    records, wall time included) and gives it back to 1e-8 (the SNMS peaks)."""
+    from fe_joint.study.artifacts import load_backbones
+    out = _copy_run(run, tmp_path / "run")
+    bb = out / "dynamics" / "backbones"
+    (bb / "baseline.npz").write_bytes((run / "dynamics" / "backbones" / "baseline.npz").read_bytes()[:1000])
+    case = tmp_path / "case.toml"
+    case.write_text(CASE)
+    assert main(["run", str(case), "--preset", "quick", "--out", str(out), "--no-progress"]) == 0
+    same = {f.name for f in (run / "dynamics" / "backbones").glob("*.json")
+            if f.read_bytes() == (bb / f.name).read_bytes()}
+    assert same == {"v3-rq1.json", "v3-rq15.json"}
+    a, b = load_backbones(run / "dynamics"), load_backbones(out / "dynamics")
+    ka = {k.name: k for k in a}
+    kb = {k.name: k for k in b}
+    assert set(ka) == set(kb) == {"baseline", "v3-rq1", "v3-rq15"}
+    new, old = b[kb["baseline"]], a[ka["baseline"]]
+    assert new.seconds != old.seconds
+    assert np.allclose(new.snms_hz, old.snms_hz, rtol=1e-8, atol=0)
+    assert np.allclose(new.snms_amplitude, old.snms_amplitude, rtol=1e-8, atol=0)
+
+
 def test_rerun_on_the_same_mesh_writes_the_same_summary_bytes(run: Path, tmp_path: Path) -> None:
     """Determinism on one rank: the fe stage and every stage after it run again (``--force``) on
     the mesh the mesh stage wrote and give bit-identical output: the reduced model's arrays (so
     every FRF job's cache key matches and no curve is recomputed), the contact surfaces and
-    summary.json, which holds no wall time — byte for byte except the backbones, which are
-    recomputed on every dynamics run: one of them (v3-rq1) ended 1 ulp apart at its last point
-    in one such rerun (source not found: not a timing; the synthesis then moved its L2 peak by
-    3e-9), so they are compared to 1e-8."""
+    summary.json, which holds no wall time, byte for byte. Every curve and every backbone is
+    reused from its cache key (a backbone recomputed in another process could land 1e-8 apart:
+    CI's machine moved the synthesized peaks of the like-for-like section by 7e-9 when backbones
+    were recomputed on every dynamics run)."""
     import hashlib
     from fe_joint.model.reduced_model import ReducedModel
     out = _copy_run(run, tmp_path / "again")
@@ -268,14 +292,16 @@ def test_rerun_on_the_same_mesh_writes_the_same_summary_bytes(run: Path, tmp_pat
 
     def digest(p: Path) -> str:
         return hashlib.sha256(p.read_bytes()).hexdigest()
-    # every curve was reused: the same files
-    for f in sorted((run / "dynamics").glob("*.npz")):
-        assert digest(f) == digest(out / "dynamics" / f.name), f.name
-    sa, sb = _summary(run), _summary(out)
-    ba, bb = sa.pop("backbones"), sb.pop("backbones")
-    assert json.dumps(sa, indent=1) == json.dumps(sb, indent=1)
-    from fe_joint.report.compare import differences
-    assert max((d[0] for d in differences(ba, bb)), default=0.0) <= 1e-8
+    # every curve and every backbone was reused: the same files
+    npz = sorted((run / "dynamics").rglob("*.npz"))
+    assert any(f.parent.name == "backbones" for f in npz)
+    for f in npz:
+        rel = f.relative_to(run)
+        assert digest(f) == digest(out / rel), rel
+    # ... not recomputed to the same bits: their records (which hold the wall time) are the same
+    for f in sorted((run / "dynamics" / "backbones").glob("*.json")):
+        assert f.read_bytes() == (out / "dynamics" / "backbones" / f.name).read_bytes(), f.name
+    assert (run / "summary.json").read_bytes() == (out / "summary.json").read_bytes()
 
 
 def test_level_absurdly_beyond_gross_slip_is_rejected(run: Path, tmp_path: Path, capsys) -> None:

@@ -222,8 +222,8 @@ def stage_dynamics(ctx: StageContext) -> dict:
               f"(macroslip estimate {level_info['macroslip']:.3g} N), {len(todo)} of "
               f"{len(every)} jobs to run ({len(every) - len(todo)} cached)")
     # the backbones need the v3 fixed points' converged k and the forced peaks' amplitudes:
-    # they run after the FRF jobs, on the same queue (a few seconds each: not cached per job,
-    # they rerun whenever the dynamics stage runs)
+    # they run after the FRF jobs, on the same queue, and are cached as the curves are (their
+    # keys are known once the curves they read are)
     bb_jobs = study.backbone_jobs(c)
     bar = None
     if ctx.rank == 0 and ctx.progress and todo:
@@ -239,8 +239,13 @@ def stage_dynamics(ctx: StageContext) -> dict:
     if any(j.name in names for j in later):
         inp.v3_out = _v3_outputs(folder, later, ctx.comm)
         run(inp, later)
+    bb_todo = study.plan_backbones(inp, folder, bb_jobs, rm_key) if ctx.rank == 0 else []
+    if ctx.comm is not None:
+        bb_todo = ctx.comm.bcast(bb_todo, root=0)
+    if bar is not None:
+        bar.update(len(bb_jobs) - len(bb_todo))
     run_jobs(lambda job: study.run_backbone_job(inp, folder, job), study.write_backbone_job,
-             bb_jobs, folder, ctx.comm, tick, skip_done=False)
+             bb_todo, folder, ctx.comm, tick, skip_done=False)
     # the k_t definitions at the v3 peaks and the alternative joints' backbones (issue 13)
     t0 = time.perf_counter()
     defs = stiff_defs.dynamics_study(inp, folder, ctx.comm)

@@ -15,6 +15,7 @@ kept) and exported as ``<name>.csv`` in the fields tmdsimpy publishes its backbo
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -24,9 +25,11 @@ import numpy as np
 from hbm import synthesize
 from hbm.nonlinear_mode import Backbone, LinearBackground, NonlinearModeProblem
 
-from .artifacts import BackboneKey, save_dataclass_npz
+from .artifacts import BackboneKey, check_files, digest, save_dataclass_npz
 from .frf import OPEN, SWEEP_TOLERANCES, SweepSettings, _setup
 
+#: bump when a backbone's result changes for the same inputs (its cache key changes with it)
+BACKBONE_VERSION = "1"
 #: backbone points (log-spaced modal amplitudes; the slip onset is added as one more)
 BACKBONE_POINTS = 35
 #: first amplitude, relative to the slip onset of the linear mode
@@ -241,3 +244,26 @@ def compute_backbone(key: BackboneKey, rm, joint, f_lin: float, peak_amplitude_t
         snms_amplitude=np.asarray(snms_amp), zeta_doubled_amplitude=dz, zeta_doubled_modal=dm,
         seconds=time.perf_counter() - t0, newton_iterations=int(bb.iterations.sum()),
         complete=bb.complete, stop_reason=bb.stop_reason)
+
+
+def backbone_key(rm_key: str, joint, f_lin: float, peak_amplitude_top: float, levels: list,
+                 settings: SweepSettings) -> str:
+    """Cache key of a backbone: the digest of everything :func:`compute_backbone` reads.
+
+    Args:
+        rm_key: ``jobs.rm_digest`` of the reduced model.
+        joint, f_lin, peak_amplitude_top, levels, settings: as for :func:`compute_backbone`.
+    """
+    return digest(BACKBONE_VERSION, rm_key, joint, float(f_lin), float(peak_amplitude_top),
+                  [float(x) for x in levels], settings)
+
+
+def is_cached(folder: Path, name: str, key: str) -> bool:
+    """A backbone ``folder/<name>`` on disk whose ``.json`` record has this key and whose recorded
+    files are intact (rank 0)."""
+    try:
+        rec = json.loads((Path(folder) / f"{name}.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return (isinstance(rec, dict) and rec.get("key") == key and "files" in rec
+            and check_files(Path(folder), rec["files"]) is None)

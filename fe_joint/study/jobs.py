@@ -382,6 +382,29 @@ def backbone_plan(inp: StudyInputs, folder: Path, job: Job):
     return joint, f_lin, max(a * top / lv for lv, a in amp.values())
 
 
+def plan_backbones(inp: StudyInputs, folder: Path, jobs: list[Job], rm_key: str) -> list[Job]:
+    """Which backbone jobs must run (rank 0, after the FRF and v3 jobs have finished): a backbone
+    whose record has the key of its inputs (:func:`.backbone.backbone_key` of
+    :func:`backbone_plan`) and intact files is kept, as a curve is.
+
+    Args:
+        inp: the study's inputs.
+        folder: the dynamics folder.
+        jobs: the backbone jobs (:func:`backbone_jobs`).
+        rm_key: :func:`rm_digest` of ``inp.rm``.
+    Returns:
+        the jobs to run, their keys set, in the given order.
+    """
+    from .backbone import backbone_key, is_cached
+    todo = []
+    for job in jobs:
+        job = replace(job, key=backbone_key(rm_key, *backbone_plan(inp, folder, job), inp.levels,
+                                            inp.settings))
+        if not is_cached(folder, job.name, job.key):
+            todo.append(job)
+    return todo
+
+
 def run_backbone_job(inp: StudyInputs, folder: Path, job: Job) -> dict:
     """Run one backbone job; returns {"backbone": BackboneResult}."""
     from .backbone import compute_backbone
@@ -393,12 +416,16 @@ def run_backbone_job(inp: StudyInputs, folder: Path, job: Job) -> dict:
 
 def write_backbone_job(folder: Path, job: Job, r: dict) -> None:
     """Write a finished backbone (rank 0): ``backbones/<name>.npz``, ``.csv`` and the ``.json``
-    record last (it marks the job done)."""
+    record last (it marks the job done: its cache key and the size and sha256 of each file)."""
     br = r["backbone"]
+    folder = Path(folder)
     sub = folder / BACKBONE_DIR
     sub.mkdir(exist_ok=True)
     br.save(folder / f"{job.name}.npz")
     br.write_csv(folder / f"{job.name}.csv")
-    (folder / f"{job.name}.json").write_text(json.dumps(
-        {"job": {**job.__dict__, "name": job.name}, "seconds": br.seconds,
+    tmp = folder / f"{job.name}.json.tmp"
+    tmp.write_text(json.dumps(
+        {"job": {**job.__dict__, "name": job.name}, "key": job.key,
+         "files": file_record(folder, [folder / f for f in job.files[:-1]]), "seconds": br.seconds,
          "points": int(br.omega.size), "newton_iterations": br.newton_iterations}, default=float))
+    tmp.replace(folder / f"{job.name}.json")

@@ -34,15 +34,13 @@ from contact_bem import (LAYER_CAP, BulkStiffness, layer_stiffness, mindlin_rati
                          patch_loop_stiffness, patch_stiffness)
 
 from ..model.joint import JointModel, stuck_modes
-from .artifacts import BackboneKey, CurveKey, check_files, digest, file_record, rq_label, v3_job_name
+from .artifacts import BackboneKey, CurveKey, file_record, rq_label, v3_job_name
 from .configurations import joint_v2
 from .contact import InterfaceSetup, _gather_concat, _split, element_patches
 from .variants import statistics, stuck_frequency, write_json
 
 #: the folder (under dynamics/) of the loop definitions and the alternative backbones
 FOLDER = "stiffness_definitions"
-#: bump when an alternative backbone's result changes for the same inputs (its cache key does)
-BACKBONE_VERSION = "1"
 #: caps of the layer stiffness (× k_bulk) whose smooth-ms stuck frequency is reported
 CAP_SENSITIVITY = (10.0, 100.0, 1000.0)
 
@@ -248,7 +246,7 @@ def _v3_arrays(folder: Path, case, comm) -> dict:
 def dynamics_study(inp, folder: Path, comm=None, progress=None) -> dict:
     """The loop definitions on every v3 surface and the alternative joints' backbones (collective;
     the backbones run on the stage's job queue, rank 0 writes). A backbone whose cache key
-    (:func:`_backbone_key`: reduced model, joint, stuck frequency, amplitude range, levels,
+    (:func:`.backbone.backbone_key`: reduced model, joint, stuck frequency, amplitude range, levels,
     settings) and file match what is on disk is kept, so a rerun computes only what changed.
 
     Args:
@@ -292,10 +290,12 @@ def dynamics_study(inp, folder: Path, comm=None, progress=None) -> dict:
 def _run_backbones(inp, sub: Path, jobs: list, plan: dict, comm, progress) -> None:
     """Run the backbones of ``jobs`` not cached in ``sub`` on the job queue; rank 0 writes each
     as ``<name>.npz`` and ``<name>.json`` (its key and file record)."""
-    from .backbone import compute_backbone
+    from .backbone import backbone_key, compute_backbone, is_cached
+    from .jobs import rm_digest
     from .queue import run_jobs
-    keys = {n: _backbone_key(inp, *p) for n, p in plan.items()}
-    todo = ([j for j in jobs if not _cached(sub, j.name, keys[j.name])]
+    rm_key = rm_digest(inp.rm)
+    keys = {n: backbone_key(rm_key, *p, inp.levels, inp.settings) for n, p in plan.items()}
+    todo = ([j for j in jobs if not is_cached(sub, j.name, keys[j.name])]
             if comm is None or comm.rank == 0 else None)
     if comm is not None:
         todo = comm.bcast(todo, root=0)
@@ -312,22 +312,6 @@ def _run_backbones(inp, sub: Path, jobs: list, plan: dict, comm, progress) -> No
              "key": keys[job.name], "files": file_record(fold, [Path(fold) / f"{job.name}.npz"])},
             default=float))
     run_jobs(run_one, write_one, todo, sub, comm, progress, skip_done=False)
-
-
-def _backbone_key(inp, joint: JointModel, f_lin: float, a_top: float) -> str:
-    """Cache key of an alternative backbone: everything ``compute_backbone`` reads."""
-    from .jobs import rm_digest
-    return digest(BACKBONE_VERSION, rm_digest(inp.rm), joint, float(f_lin), float(a_top),
-                  [float(x) for x in inp.levels], inp.settings)
-
-
-def _cached(sub: Path, name: str, key: str) -> bool:
-    """An alternative backbone on disk with this key and an intact file (rank 0)."""
-    try:
-        rec = json.loads((Path(sub) / f"{name}.json").read_text())
-    except (OSError, ValueError):
-        return False
-    return rec.get("key") == key and "files" in rec and check_files(sub, rec["files"]) is None
 
 
 def files(folder: Path, summary: dict) -> list[Path]:
