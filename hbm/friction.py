@@ -1369,9 +1369,15 @@ class FrictionContacts:
         """
         tab = _StepTables(u, self.kt[idx], self.mu[idx], self.kn[idx], self.n0[idx], self.gap[idx])
         n_cycles = self.max_cycles if max_cycles is None else int(max_cycles)
-        final, hist, cyc, err, jumped = self._forward(tab, newton, n_cycles, jacobian)
-        if err > self.close_tol:
-            raise CycleNotClosed(f"friction cycle did not close in {n_cycles} periods", err)
+        if not newton and USE_JIT and friction_jit.AVAILABLE:
+            # plain repetition: all periods in one compiled call (no history kept: the neutral
+            # elements' sensitivity is propagated as it goes)
+            final, cyc, dwh = self._repeat(tab, fourier, jacobian, n_cycles)
+            hist, jumped = dwh, np.zeros(len(idx), dtype=bool)
+        else:
+            final, hist, cyc, err, jumped = self._forward(tab, newton, n_cycles, jacobian)
+            if err > self.close_tol:
+                raise CycleNotClosed(f"friction cycle did not close in {n_cycles} periods", err)
         # Elements that stick through the whole closing cycle have a neutral, history-dependent
         # slider; if a Newton restart touched their history, redo them by plain repetition from
         # rest so that state and Jacobian are those of the march from rest.
@@ -1402,6 +1408,39 @@ class FrictionContacts:
             if redo.any():
                 out[5][redo], out[6][redo] = sub[5], sub[6]
         return out
+
+    def _repeat(self, tab: _StepTables, fourier: Fourier | None, jacobian: bool, max_cycles: int):
+        """Plain repetition from rest, compiled (friction_jit.repeat): the march of ``_forward``
+        with newton=False, its give-up test included.
+
+        Returns:
+            final record (each element's closing period), periods per element, and the slider
+            sensitivity at the start of the closing period propagated from rest (k, 2, 3 nH;
+            zeros without jacobian).
+        Raises:
+            ConvergenceError: predicted not to close within the budget (as _give_up_if_slow);
+            CycleNotClosed: the budget was spent.
+        """
+        k, nt = tab.ut.shape
+        # most repetitions on the resonator give up (a contraction too slow): march without the
+        # sensitivities first, and again with them (the same periods) only once it has closed
+        for jac in ((False, True) if jacobian else (False,)):
+            rec = _Record(k, nt)
+            rec.cdone[:] = False
+            E = fourier.E if jac else np.zeros((nt, 1))
+            cyc, dwh, info = np.zeros(k, dtype=np.int64), np.zeros((k, 2, 3 * E.shape[1])), np.zeros(2)
+            status = friction_jit.repeat(
+                tab.kt, tab.mu, tab.kn, tab.ut, tab.tcl, tab.L, tab.al, tab.be, tab.pe, tab.Lpe,
+                tab.bad, tab.tlo, tab.ct, tab.Nc, tab.Lc, tab.Lg, tab.pg, tab.scale, self.close_tol,
+                max_cycles, GIVE_UP_AFTER, GIVE_UP_MARGIN, E, jac, rec.code, rec.wst, rec.slip,
+                rec.mode0, rec.AP, rec.AQ, rec.evc, rec.evt, rec.wend, cyc, dwh, info)
+            if status == friction_jit.GAVE_UP:
+                raise ConvergenceError(f"friction cycle predicted not to close in {max_cycles} "
+                                       f"periods (contraction {info[0]:.6f} per period)", float(info[1]))
+            if status == friction_jit.BUDGET_SPENT:
+                raise CycleNotClosed(f"friction cycle did not close in {max_cycles} periods",
+                                     float(info[1]))
+        return rec, cyc, dwh
 
     def _forward(self, tab: _StepTables, newton: bool, max_cycles: int, keep: bool):
         """Forward march of all elements until each one's cycle closes.
@@ -1593,7 +1632,9 @@ def _march_jacobian(tab: _StepTables, final: _Record, hist, cyc, fourier: Fourie
     In the final (closed) cycle the slider sensitivity is affine in its start value,
     dw_j = Phi_j dw_0 + d_j. The start value is that of the periodic state,
     dw_0 = (I - Phi_nt)^-1 d_nt (implicit derivative of the fixed point w = Phi(w)); for neutral
-    elements (det(I - Phi_nt) ~ 0) it is the plain propagation of the history from rest.
+    elements (det(I - Phi_nt) ~ 0) it is the plain propagation of the history from rest:
+    ``hist`` is the march's history (``_forward``), or that propagation already done for every
+    element, (k, 2, 3 nH) (``_repeat``).
     Compiled (hbm.friction_jit) when the march is, else in numpy.
     """
     k, nt = final.code.shape
@@ -1617,7 +1658,8 @@ def _march_jacobian(tab: _StepTables, final: _Record, hist, cyc, fourier: Fourie
         dw0[fixed] = np.linalg.solve(Mfix[fixed], D_end[fixed])
     neutral = np.nonzero(~fixed)[0]
     if neutral.size:
-        dw0[neutral] = _neutral_history(tab, hist, cyc, neutral, E)
+        dw0[neutral] = (hist[neutral] if isinstance(hist, np.ndarray)
+                        else _neutral_history(tab, hist, cyc, neutral, E))
     dN = np.zeros((k, nt, 3, nH))
     dN[:, :, 2] = (tab.kn[:, None] * tab.closed)[..., None] * E[None]
     if jit:

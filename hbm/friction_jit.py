@@ -811,28 +811,130 @@ def sensitivities(g: np.ndarray, kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst, m
             sensitivities, see force_sensitivities), mm per mm of harmonic, harmonics in the
             element layout direction * nH + harmonic.
     """
-    nt, nH = E.shape
-    ws = workspace()
-    P, D, P2, D2 = np.empty((2, 2)), np.empty((2, 3 * nH)), np.empty((2, 2)), np.empty((2, 3 * nH))
-    A, G, S = np.empty((2, 2)), np.empty((2, 3, 4)), np.empty((2, 3 * nH))
+    ws, bufs = workspace(), _buffers(E.shape[1])
     for i in range(g.size):
-        P[:] = 0.0
-        P[0, 0] = P[1, 1] = 1.0
-        D[:] = 0.0
-        for j in range(nt):
-            if code[i, j] == OPEN_STEP:                # w_j = u_j: forgets the start
-                P[:] = 0.0
-                D[:] = 0.0
-                D[0, 0:nH], D[1, nH:2 * nH] = E[j], E[j]
-            elif code[i, j] != STICK_STEP:             # (stick: A = I, no source)
-                _step(ws, i, g[i], j, kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst, mode0, evc,
-                      evt, A, G)
-                _propagate(j, A, G, E, P, D, P2, D2, S)
-                P, P2, D, D2 = P2, P, D2, D
-            if full or j == nt - 1:
-                jj = j if full else 0
-                Ps[i, jj] = P
-                Ds[i, 0, jj], Ds[i, 1, jj] = D[0], D[1]
+        _row_sensitivities(ws, bufs, i, g[i], kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst, mode0,
+                           evc, evt, E, full, Ps, Ds)
+
+
+@njit(cache=True, error_model="numpy")
+def _buffers(nH: int) -> tuple:
+    """Scratch arrays of _row_sensitivities: P, D, P2, D2, A, G, S."""
+    return (np.empty((2, 2)), np.empty((2, 3 * nH)), np.empty((2, 2)), np.empty((2, 3 * nH)),
+            np.empty((2, 2)), np.empty((2, 3, 4)), np.empty((2, 3 * nH)))
+
+
+@njit(cache=True, error_model="numpy")
+def _row_sensitivities(ws: tuple, bufs: tuple, i: int, e: int, kt, mu, kn, ut, L, Lg, pg, ct, Nc,
+                       code, wst, mode0, evc, evt, E: np.ndarray, full: bool, Ps: np.ndarray,
+                       Ds: np.ndarray) -> None:
+    """:func:`sensitivities` of record row i (step tables row e)."""
+    nt, nH = E.shape
+    P, D, P2, D2, A, G, S = bufs
+    P[:] = 0.0
+    P[0, 0] = P[1, 1] = 1.0
+    D[:] = 0.0
+    for j in range(nt):
+        if code[i, j] == OPEN_STEP:                # w_j = u_j: forgets the start
+            P[:] = 0.0
+            D[:] = 0.0
+            D[0, 0:nH], D[1, nH:2 * nH] = E[j], E[j]
+        elif code[i, j] != STICK_STEP:             # (stick: A = I, no source)
+            _step(ws, i, e, j, kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst, mode0, evc,
+                  evt, A, G)
+            _propagate(j, A, G, E, P, D, P2, D2, S)
+            P, P2, D, D2 = P2, P, D2, D
+        if full or j == nt - 1:
+            jj = j if full else 0
+            Ps[i, jj] = P
+            Ds[i, 0, jj], Ds[i, 1, jj] = D[0], D[1]
+
+
+# ============================================================================ plain repetition
+#: repeat's outcomes
+CLOSED, GAVE_UP, BUDGET_SPENT = 0, 1, 2
+
+
+@njit(cache=True, error_model="numpy")
+def repeat(kt, mu, kn, ut, tcl, L, al, be, pe, Lpe, bad, tlo, ct, Nc, Lc, Lg, pg, scale,
+           close_tol: float, max_cycles: int, give_up_after: int, give_up_margin: float,
+           E: np.ndarray, jacobian: bool, code, wst, slip, mode0, AP, AQ, evc, evt, wend,
+           cyc, dwh, info) -> int:
+    """Plain repetition from rest of every element of the step tables (friction's march with
+    ``newton=False``) in one call: period after period, each element until its cycle closes
+    (|w_end - w_start| <= close_tol * scale). The elements go in lockstep, so the give-up test
+    (friction._give_up_if_slow) sees the same elements at the same period as the numpy loop;
+    the Python loop paid ~150 µs of bookkeeping per period, and a neutral element may need
+    thousands.
+
+    Args:
+        kt ... pg, scale: the step tables (friction._StepTables), k elements.
+        close_tol, max_cycles: closure tolerance (relative to scale) and period budget.
+        give_up_after, give_up_margin: friction.GIVE_UP_AFTER, friction.GIVE_UP_MARGIN.
+        E: (nt, nH) inverse DFT (read only with jacobian).
+        jacobian: also propagate the slider sensitivity from rest through the periods before
+            the closing one (friction._neutral_history, the same recurrence in the same order).
+        code ... wend: record arrays (friction._Record, k rows), filled with each element's
+            closing period.
+        cyc: (k,) periods marched per element. dwh: (k, 2, 3 nH) the propagated sensitivity
+            (zero without jacobian). info: (2,) the largest contraction per period and closure
+            error of the elements still open when the march stopped.
+    Returns:
+        CLOSED, GAVE_UP (predicted not to close within give_up_margin * max_cycles) or
+        BUDGET_SPENT.
+    """
+    k = kt.size
+    nt, nH = E.shape
+    w = np.zeros(k, dtype=np.complex128)
+    dev, prev = np.zeros(k), np.zeros(k)
+    is_open = np.ones(k, dtype=np.bool_)
+    ws, bufs = workspace(), _buffers(nH)
+    Ps, Ds = np.empty((k, 1, 2, 2)), np.empty((k, 2, 1, 3 * nH))
+    dwh[:] = 0.0
+    n_open, cycle = k, 0
+    while n_open > 0 and cycle < max_cycles:
+        cycle += 1
+        for i in range(k):
+            if not is_open[i]:
+                continue
+            # a fresh record row, as friction._Record makes one per period (the switch fields
+            # are written at switching steps only)
+            mode0[i, :] = 0
+            evc[i, :, :] = 0
+            evt[i, :, :] = 0.0
+            AP[i, :] = 1.0
+            AQ[i, :] = 0.0
+            wend[i] = _steps(kt[i], ut[i], tcl[i], L[i], al[i], be[i], pe[i], Lpe[i], bad[i], tlo[i],
+                             ct[i], Nc[i], Lc[i], w[i], code[i], wst[i], slip[i], mode0[i], AP[i],
+                             AQ[i], evc[i], evt[i])
+            cyc[i] = cycle
+            prev[i], dev[i] = dev[i], abs(wend[i] - w[i]) / scale[i]
+            if dev[i] <= close_tol:
+                is_open[i] = False
+                n_open -= 1
+                continue
+            if jacobian:               # a period before the closing one: chain its affine map
+                _row_sensitivities(ws, bufs, i, i, kt, mu, kn, ut, L, Lg, pg, ct, Nc, code, wst,
+                                   mode0, evc, evt, E, False, Ps, Ds)
+                for x in range(3 * nH):
+                    d0, d1 = dwh[i, 0, x], dwh[i, 1, x]
+                    dwh[i, 0, x] = Ps[i, 0, 0, 0] * d0 + Ps[i, 0, 0, 1] * d1 + Ds[i, 0, 0, x]
+                    dwh[i, 1, x] = Ps[i, 0, 1, 0] * d0 + Ps[i, 0, 1, 1] * d1 + Ds[i, 1, 0, x]
+            w[i] = wend[i]
+        if cycle >= give_up_after and n_open > 0:
+            rho_max, dev_max, give_up = -np.inf, 0.0, False
+            for i in range(k):
+                if not is_open[i]:
+                    continue
+                rho = dev[i] / prev[i] if prev[i] > 0.0 else 1.0
+                need = np.log(close_tol / max(dev[i], 1e-300)) / np.log(rho) if rho < 1.0 else np.inf
+                give_up = give_up or cycle + need > give_up_margin * max_cycles
+                rho_max, dev_max = max(rho_max, rho), max(dev_max, dev[i])
+            if give_up:
+                info[0], info[1] = rho_max, dev_max
+                return GAVE_UP
+    info[0], info[1] = 0.0, dev.max()
+    return CLOSED if info[1] <= close_tol else BUDGET_SPENT
 
 
 @njit(cache=True, error_model="numpy")

@@ -377,6 +377,45 @@ def test_compiled_jacobian_equals_the_numpy_one(monkeypatch):
     assert np.abs(dT[True] - dT[False]).max() <= 1e-10 * np.abs(dT[False]).max()
 
 
+@pytest.mark.skipif(not friction_jit.AVAILABLE, reason="the compiled path needs numba (FE_JOINT_NO_JIT set)")
+def test_compiled_repetition_equals_the_python_loop():
+    """Plain repetition in one compiled call (friction_jit.repeat, ``FrictionContacts._repeat``)
+    marches the same periods as the Python loop over compiled periods (``_forward`` with
+    newton=False): the same period counts, step codes and end sliders bit for bit, the Jacobian
+    (the neutral element's propagated through its 240-period history) to 1e-13, and the same
+    give-up (contraction and residual) when the budget is too small."""
+    from test_hbm_regression import PARAMS, U as u_neutral
+    from hbm.errors import ConvergenceError
+    neutral = FrictionContacts(np.array([[[0, 1, 2], [-1, -1, -1]]]), **PARAMS)
+    sets = [(neutral, u_neutral[None], Fourier(3, u_neutral.shape[1]))]
+    for U, f in [(switch_chains(), Fourier(3, 16)), (ellipses(), Fourier(2, 64))]:
+        c = contacts(len(U))
+        u = f.to_time(U)
+        open_all, stuck_all = c._classify(u, np.arange(c.ne))
+        m = np.nonzero(~(open_all | stuck_all))[0]
+        sets.append((contacts(m.size), u[m], f))
+    periods = []
+    for c, u, f in sets:
+        tab = friction._StepTables(u, c.kt, c.mu, c.kn, c.n0, c.gap)
+        final, hist, cyc, err, _ = c._forward(tab, False, 5000, True)
+        rec, cyc2, dwh = c._repeat(tab, f, True, 5000)
+        assert err <= c.close_tol and np.array_equal(cyc, cyc2)
+        periods.append(int(cyc.max()))
+        assert np.array_equal(final.code, rec.code) and np.array_equal(final.evc, rec.evc)
+        assert np.array_equal(final.wend, rec.wend)
+        J0 = friction._march_jacobian(tab, final, hist, cyc, f)[0]
+        J1 = friction._march_jacobian(tab, rec, dwh, cyc2, f)[0]
+        assert np.abs(J1 - J0).max() <= 1e-13 * np.abs(J0).max()
+    assert periods[0] > 100                     # the neutral element: a long history
+    tab = friction._StepTables(u_neutral[None], neutral.kt, neutral.mu, neutral.kn, neutral.n0, neutral.gap)
+    got = []
+    for march in (lambda: neutral._forward(tab, False, 30, True), lambda: neutral._repeat(tab, sets[0][2], True, 30)):
+        with pytest.raises(ConvergenceError, match="predicted not to close") as e:
+            march()
+        got.append((str(e.value), e.value.residual))
+    assert got[0] == got[1]
+
+
 def test_compiled_march_constants_are_the_friction_modules():
     """friction_jit repeats friction's tolerances and codes as literals (numba freezes globals):
     they must be the same values."""
