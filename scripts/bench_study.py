@@ -10,7 +10,7 @@ worktree`` into a temporary folder and run with the same interpreter (``PYTHONPA
 packages first); its numba cache is its own.
 
 Usage: python scripts/bench_study.py [--preset quick] [--np 2] [--peer REV] [--out DIR]
-       [--keep]
+       [--keep] [--timeout S]
 
 Prints markdown: the wall time of each run and of each stage, then every curve's time, points and
 peak with the ratio to the peer and the peak's relative difference to the peer's (issue 16 asks
@@ -33,8 +33,9 @@ ROOT = Path(__file__).resolve().parent.parent
 PEAK_RTOL_HZ, PEAK_RTOL_AMPLITUDE = 1e-4, 1e-3
 
 
-def run_tree(tree: Path, preset: str, np_: int, out: Path) -> float:
-    """``fe-joint run --preset`` of the code in ``tree`` into a fresh ``out``; wall time, s."""
+def run_tree(tree: Path, preset: str, np_: int, out: Path, timeout: float | None) -> float | None:
+    """``fe-joint run --preset`` of the code in ``tree`` into a fresh ``out``; wall time, s (None:
+    stopped after ``timeout`` s)."""
     if out.exists():
         shutil.rmtree(out)
     env = dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
@@ -44,7 +45,12 @@ def run_tree(tree: Path, preset: str, np_: int, out: Path) -> float:
     if np_ > 1:
         cmd = ["mpirun", "-q", "--use-hwthread-cpus", "-n", str(np_)] + cmd
     t = time.perf_counter()
-    subprocess.run(cmd, env=env, cwd=tree, check=True, stdout=subprocess.DEVNULL)
+    try:
+        subprocess.run(cmd, env=env, cwd=tree, check=True, stdout=subprocess.DEVNULL,
+                       timeout=timeout, start_new_session=True)
+    except subprocess.TimeoutExpired:
+        subprocess.run(["pkill", "-f", f"--out {out}"], check=False)
+        return None
     return time.perf_counter() - t
 
 
@@ -58,7 +64,16 @@ def warm_up(tree: Path) -> None:
 
 
 def results(out: Path) -> dict:
-    """Stage, curve and backbone seconds and each curve's peak from a finished run."""
+    """Stage, curve and backbone seconds and each curve's peak from a finished run (of a run
+    stopped by the timeout: the curves it finished, read from their files)."""
+    if not (out / "timings.json").exists():
+        import numpy as np
+        curves, peaks = {}, {}
+        for f in sorted((out / "dynamics").glob("*@*.npz")):
+            with np.load(f) as z:
+                curves[f.stem] = float(z["seconds"])
+                peaks[f.stem] = (float(z["peak_hz"]), float(z["peak_amplitude"]), int(z["n_points"]))
+        return {"stages": {}, "curves": curves, "backbones": {}, "peaks": peaks}
     t = json.loads((out / "timings.json").read_text())
     s = json.loads((out / "summary.json").read_text())
     return {"stages": t["stages"], "curves": t["curves"], "backbones": t.get("backbones", {}),
@@ -73,12 +88,13 @@ def rel(a: float, b: float) -> float:
 def table(runs: dict, walls: dict) -> bool:
     """Print the tables; True when every peak is within the tolerances of the peer's."""
     labels = list(runs)
-    stages = list(runs[labels[0]]["stages"])
+    stages = list(dict.fromkeys(st for r in runs.values() for st in r["stages"]))
     print("| run | wall (s) | " + " | ".join(f"{s} (s)" for s in stages) + " |")
     print("|---|---|" + "---|" * len(stages))
     for lb in labels:
         st = runs[lb]["stages"]
-        print(f"| {lb} | {walls[lb]:.1f} | " + " | ".join(
+        wall = f"{walls[lb]:.1f}" if walls[lb] is not None else "stopped (timeout)"
+        print(f"| {lb} | {wall} | " + " | ".join(
             "—" if st.get(s) is None else f"{st[s]:.1f}" for s in stages) + " |")
     ok = True
     peer = labels[-1] if len(labels) > 1 else None
@@ -97,8 +113,7 @@ def table(runs: dict, walls: dict) -> bool:
         if peer:
             a, b = here["peaks"].get(name), runs[peer]["peaks"].get(name)
             if a is None or b is None:
-                row += " | — | — |"
-                ok = False
+                row += " | — | not finished |"
             else:
                 dh, da = rel(a[0], b[0]), rel(a[1], b[1])
                 ok &= dh <= PEAK_RTOL_HZ and da <= PEAK_RTOL_AMPLITUDE
@@ -120,6 +135,8 @@ def main(argv=None) -> int:
     p.add_argument("--peer", default=None, help="a git revision to run as the peer (e.g. main~3)")
     p.add_argument("--out", default=None, help="where the runs go (default: a temporary folder)")
     p.add_argument("--keep", action="store_true", help="keep the runs' folders")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="stop a run after this many seconds (its finished curves are compared)")
     a = p.parse_args(argv)
     if a.np < 1:
         p.error(f"--np {a.np}: must be at least 1")
@@ -143,9 +160,10 @@ def main(argv=None) -> int:
             warm_up(tree)
         for lb, tree in trees.items():
             out = base / ("run-" + lb.replace(" ", "-"))
-            walls[lb] = run_tree(tree, a.preset, a.np, out)
+            walls[lb] = run_tree(tree, a.preset, a.np, out, a.timeout)
             runs[lb] = results(out)
-            print(f"[bench_study] {lb}: {walls[lb]:.1f} s", file=sys.stderr, flush=True)
+            print(f"[bench_study] {lb}: " + (f"{walls[lb]:.1f} s" if walls[lb] is not None else
+                  f"stopped after {a.timeout:.0f} s"), file=sys.stderr, flush=True)
     finally:
         if wt is not None and not a.keep:
             subprocess.run(["git", "worktree", "remove", "--force", str(wt)], cwd=ROOT)
