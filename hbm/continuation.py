@@ -158,14 +158,20 @@ class ContinuationSettings:
 
 
 # ---------------------------------------------------------------------------------- pieces
-class _Eval(NamedTuple):
+class _Eval:
     """Residual R (n_H, n_c), correction force g, nonlinear elements nl, their dg/dU blocks Dg,
-    and the norm scale max(|U|, |U_lin|) of the convergence test (mm)."""
-    R: np.ndarray
-    g: np.ndarray
-    nl: np.ndarray
-    Dg: np.ndarray | None
-    scale: float
+    and the norm scale max(|U|, |U_lin|) of the convergence test (mm).
+
+    Dg is computed when first read (``HarmonicBalance.residual(deferred=True)``): a line
+    search's rejected trials never read it."""
+    __slots__ = ("R", "g", "nl", "_Dg", "scale")
+
+    def __init__(self, R: np.ndarray, g: np.ndarray, nl: np.ndarray, Dg, scale: float) -> None:
+        self.R, self.g, self.nl, self._Dg, self.scale = R, g, nl, Dg, scale
+
+    @property
+    def Dg(self) -> np.ndarray | None:
+        return self._Dg() if callable(self._Dg) else self._Dg
 
 
 class _Correction(NamedTuple):
@@ -215,7 +221,7 @@ class _Scaling:
 def _evaluate(hb, force: np.ndarray, U: np.ndarray, w: float) -> _Eval:
     """Residual and Jacobian blocks at (U mm, w rad/s) for force amplitude ``force`` (N)."""
     Ul = hb.ulin(w, force)
-    R, g, nl, Dg = hb.residual(U, w, Ul)
+    R, g, nl, Dg = hb.residual(U, w, Ul, deferred=True)
     return _Eval(R, g, nl, Dg, max(np.linalg.norm(U), np.linalg.norm(Ul), 1e-300))
 
 

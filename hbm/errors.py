@@ -6,12 +6,17 @@ class ConvergenceError(RuntimeError):
     """A nonlinear iteration (Newton, continuation, cycle closure) did not converge.
 
     Attributes:
-        residual: the residual norm reached when the iteration stopped.
+        residual: the residual norm reached when the iteration stopped (the best one, where
+            ``best`` is given).
+        best: the best iterate reached, where the iteration can give it (``HarmonicBalance.
+            newton``: a Solution with ``residual``), for a caller that can use a looser
+            tolerance; else None.
     """
 
-    def __init__(self, message: str, residual: float = float("nan")) -> None:
+    def __init__(self, message: str, residual: float = float("nan"), best=None) -> None:
         super().__init__(f"{message} (residual reached: {residual:.3e})")
         self.residual = float(residual)
+        self.best = best
 
 
 class CycleNotClosed(ConvergenceError):

@@ -1367,13 +1367,21 @@ class FrictionContacts:
             and when jacobian: dT (k, 2, nt, 3 nH),
             dN (k, nt, 3 nH) in the element's (direction, harmonic) layout.
         """
+        out, jac = self._march(u, idx, fourier, jacobian, newton, max_cycles)
+        return out + list(jac()) if jacobian else out
+
+    def _march(self, u: np.ndarray, idx: np.ndarray, fourier: Fourier | None, jacobian: bool,
+               newton: bool = True, max_cycles: int | None = None):
+        """:meth:`march` with its Jacobian deferred: (the forward results, a function that
+        returns (dT, dN) on its first call and the same arrays after; None without jacobian).
+        A Newton line search rejects most of its trials: their Jacobians are never needed."""
         tab = _StepTables(u, self.kt[idx], self.mu[idx], self.kn[idx], self.n0[idx], self.gap[idx])
         n_cycles = self.max_cycles if max_cycles is None else int(max_cycles)
         if not newton and USE_JIT and friction_jit.AVAILABLE:
             # plain repetition: all periods in one compiled call (no history kept: the neutral
-            # elements' sensitivity is propagated as it goes)
-            final, cyc, dwh = self._repeat(tab, fourier, jacobian, n_cycles)
-            hist, jumped = dwh, np.zeros(len(idx), dtype=bool)
+            # elements' sensitivity is propagated when the Jacobian is asked for)
+            final, cyc, hist = self._repeat(tab, fourier, jacobian, n_cycles)
+            jumped = np.zeros(len(idx), dtype=bool)
         else:
             final, hist, cyc, err, jumped = self._forward(tab, newton, n_cycles, jacobian)
             if err > self.close_tol:
@@ -1387,6 +1395,7 @@ class FrictionContacts:
             M = np.eye(2) - _cycle_matrix(tab, jr, final.take(jr))
             redo[jr] = np.abs(M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]) <= NEWTON_DET
         T, slip, n_cyc = tab.force(final), final.slip, int(cyc.max())
+        sub_jac = None
         if redo.any():
             # Plain repetition contracts only geometrically: rates of 0.93 per cycle and, for an
             # element that barely slips at one sample, 1 − 1e-6 were seen on the resonator. These
@@ -1394,8 +1403,8 @@ class FrictionContacts:
             # state is kept: it is a periodic state too (the neutral direction only shifts the
             # slider), and its Jacobian is the plain propagation used for neutral elements.
             try:
-                sub = self.march(u[redo], idx[redo], fourier, jacobian, newton=False,
-                                 max_cycles=REDO_CYCLES_FACTOR * n_cycles)
+                sub, sub_jac = self._march(u[redo], idx[redo], fourier, jacobian, newton=False,
+                                           max_cycles=REDO_CYCLES_FACTOR * n_cycles)
             except ConvergenceError:
                 redo[:] = False
                 self.neutral_kept += 1
@@ -1403,28 +1412,31 @@ class FrictionContacts:
                 T[redo], slip[redo] = sub[0], sub[2]
                 n_cyc = max(n_cyc, sub[4])
         out = [T, tab.N, slip, tab.closed, n_cyc]
-        if jacobian:
-            out += list(_march_jacobian(tab, final, hist, cyc, fourier))
-            if redo.any():
-                out[5][redo], out[6][redo] = sub[5], sub[6]
-        return out
+        if not jacobian:
+            return out, None
+
+        def jac():
+            dT, dN = _march_jacobian(tab, final, hist() if callable(hist) else hist, cyc, fourier)
+            if sub_jac is not None:
+                dT[redo], dN[redo] = sub_jac()
+            return dT, dN
+        return out, once(jac)
 
     def _repeat(self, tab: _StepTables, fourier: Fourier | None, jacobian: bool, max_cycles: int):
         """Plain repetition from rest, compiled (friction_jit.repeat): the march of ``_forward``
         with newton=False, its give-up test included.
 
         Returns:
-            final record (each element's closing period), periods per element, and the slider
-            sensitivity at the start of the closing period propagated from rest (k, 2, 3 nH;
-            zeros without jacobian).
+            final record (each element's closing period), periods per element, and (None without
+            jacobian) a function returning the slider sensitivity at the start of the closing
+            period propagated from rest, (k, 2, 3 nH).
         Raises:
             ConvergenceError: predicted not to close within the budget (as _give_up_if_slow);
             CycleNotClosed: the budget was spent.
         """
         k, nt = tab.ut.shape
-        # most repetitions on the resonator give up (a contraction too slow): march without the
-        # sensitivities first, and again with them (the same periods) only once it has closed
-        for jac in ((False, True) if jacobian else (False,)):
+
+        def run(jac: bool):
             rec = _Record(k, nt)
             rec.cdone[:] = False
             E = fourier.E if jac else np.zeros((nt, 1))
@@ -1440,7 +1452,11 @@ class FrictionContacts:
             if status == friction_jit.BUDGET_SPENT:
                 raise CycleNotClosed(f"friction cycle did not close in {max_cycles} periods",
                                      float(info[1]))
-        return rec, cyc, dwh
+            return rec, cyc, dwh
+        # most repetitions on the resonator give up (a contraction too slow): march without the
+        # sensitivities, and again with them (the same periods) only when they are asked for
+        rec, cyc, _ = run(False)
+        return rec, cyc, (once(lambda: run(True)[2]) if jacobian else None)
 
     def _forward(self, tab: _StepTables, newton: bool, max_cycles: int, keep: bool):
         """Forward march of all elements until each one's cycle closes.
@@ -1500,19 +1516,23 @@ class FrictionContacts:
         return rows[go], w_next
 
     # ------------------------------------------------------------------ AFT
-    def evaluate(self, U: np.ndarray, fourier: Fourier, jacobian: bool = True):
+    def evaluate(self, U: np.ndarray, fourier: Fourier, jacobian: bool = True,
+                 deferred: bool = False):
         """Force harmonics and their Jacobian for relative-displacement harmonics U.
 
         Args:
             U: (ne, 3, nH) harmonics of u = q_A - q_B in the element frame, mm.
             fourier: the Fourier object (harmonics, samples).
             jacobian: compute the Jacobian.
+            deferred: return the Jacobian as a function that computes it on its first call (and
+                returns the same array after): a line search's rejected trials never ask.
 
         Returns:
             F: (ne, 3, nH) harmonics of (T1, T2, N - n0), N.
             nl: indices of the elements whose Jacobian differs from the linear base stiffness.
             DF: (len(nl), 3 nH, 3 nH) Jacobian dF/dU of those elements, N/mm, in the element
-                layout index = direction * nH + harmonic (None when jacobian=False).
+                layout index = direction * nH + harmonic (None when jacobian=False; a function
+                returning it when deferred).
         """
         ne, nH = self.ne, fourier.nH
         if U.shape != (ne, 3, nH):
@@ -1532,33 +1552,42 @@ class FrictionContacts:
         lin = (stuck_all & base) | (open_all & ~base)
         marched = np.nonzero(~(open_all | stuck_all))[0]
         nl = np.nonzero(~lin)[0]
-        DF = None
-        if jacobian:
-            DF = np.zeros((nl.size, 3 * nH, 3 * nH))
-            pos = np.full(ne, -1)
-            pos[nl] = np.arange(nl.size)
-            # stuck elements that are not in the base (closed only under vibration): kt, kn
-            sx = np.nonzero(stuck_all & ~base)[0]
-            if sx.size:
-                eye = np.eye(nH)
-                blk = np.zeros((sx.size, 3 * nH, 3 * nH))
-                for dd, kk in enumerate((self.kt[sx], self.kt[sx], self.kn[sx])):
-                    blk[:, dd * nH:(dd + 1) * nH, dd * nH:(dd + 1) * nH] = kk[:, None, None] * eye
-                DF[pos[sx]] = blk
+        jac = None
         if marched.size:
-            res = self.march(u[marched], marched, fourier, jacobian)
+            res, jac = self._march(u[marched], marched, fourier, jacobian)
             T, Nt = res[0], res[1]
             F[marched, 0:2] = fourier.to_freq(T)
             F[marched, 2] = fourier.to_freq(Nt - self.n0[marched, None])
-            if jacobian:
-                dT, dN = res[5], res[6]
-                D = fourier.D
-                blk = np.empty((marched.size, 3 * nH, 3 * nH))
-                blk[:, 0:nH] = D @ dT[:, 0]
-                blk[:, nH:2 * nH] = D @ dT[:, 1]
-                blk[:, 2 * nH:] = D @ dN
-                DF[pos[marched]] = blk
-        return F, nl, DF
+        if not jacobian:
+            return F, nl, None
+        DF = once(lambda: self._force_jacobian(nl, stuck_all, marched, jac, fourier))
+        return F, nl, (DF if deferred else DF())
+
+    def _force_jacobian(self, nl: np.ndarray, stuck_all: np.ndarray, marched: np.ndarray, jac,
+                        fourier: Fourier) -> np.ndarray:
+        """The blocks dF/dU of the elements nl (see :meth:`evaluate`): k_t, k_n for the stuck
+        elements outside the linear base, the march's Jacobian (``jac()``) for the marched."""
+        nH = fourier.nH
+        DF = np.zeros((nl.size, 3 * nH, 3 * nH))
+        pos = np.full(self.ne, -1)
+        pos[nl] = np.arange(nl.size)
+        # stuck elements that are not in the base (closed only under vibration): kt, kn
+        sx = np.nonzero(stuck_all & ~self.closed_at_rest)[0]
+        if sx.size:
+            eye = np.eye(nH)
+            blk = np.zeros((sx.size, 3 * nH, 3 * nH))
+            for dd, kk in enumerate((self.kt[sx], self.kt[sx], self.kn[sx])):
+                blk[:, dd * nH:(dd + 1) * nH, dd * nH:(dd + 1) * nH] = kk[:, None, None] * eye
+            DF[pos[sx]] = blk
+        if marched.size:
+            dT, dN = jac()
+            D = fourier.D
+            blk = np.empty((marched.size, 3 * nH, 3 * nH))
+            blk[:, 0:nH] = D @ dT[:, 0]
+            blk[:, nH:2 * nH] = D @ dT[:, 1]
+            blk[:, 2 * nH:] = D @ dN
+            DF[pos[marched]] = blk
+        return DF
 
     # ------------------------------------------------------------------ post-processing
     def histories(self, U: np.ndarray, fourier: Fourier):
@@ -1734,3 +1763,14 @@ def _concat_records(recs):
     for name in vars(recs[0]):
         setattr(out, name, np.concatenate([getattr(r, name) for r in recs]))
     return out
+
+
+def once(fn):
+    """``fn()`` computed on the first call and returned again after (a deferred Jacobian)."""
+    box = []
+
+    def get():
+        if not box:
+            box.append(fn())
+        return box[0]
+    return get

@@ -44,7 +44,7 @@ import scipy.sparse.linalg as spla
 from .continuation import ContinuationSettings, FRFResult, continue_frf
 from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
-from .friction import FrictionContacts
+from .friction import FrictionContacts, once
 from .preconditioner import PRECONDITIONERS
 from .structure import LinearStructure, Receptance
 
@@ -159,6 +159,12 @@ def _modal_apply(Psi: np.ndarray, Ls: list, v: np.ndarray) -> np.ndarray:
             S[:, 2 * h - 1], S[:, 2 * h] = z.real, -z.imag
     return (Psi @ S).T
 
+#: Newton gives up when its residual has not halved in this many iterations (see ``newton``) ...
+STALL_ITERATIONS = 10
+#: ... or after this many line searches in a row found no decrease (10 trials each)
+STALL_LINE_SEARCHES = 3
+
+
 class _PreconditionerCache:
     """A preconditioner kept between GMRES solves, with the conditions of its reuse.
 
@@ -237,7 +243,7 @@ class HarmonicBalance:
         self.ne, self.nc = c.ne, 3 * c.ne
         self._pre = None          # cached preconditioner (GMRES path)
         self.krylov_tol = float(krylov_tol)
-        self.stats = {"residuals": 0, "linear_solves": 0, "gmres_iterations": 0, "sign_factorizations": 0,
+        self.stats = {"residuals": 0, "jacobians": 0, "linear_solves": 0, "gmres_iterations": 0, "sign_factorizations": 0,
                       "dense_fallbacks": 0, "preconditioners": 0}
 
     # ------------------------------------------------------------------ layouts
@@ -301,21 +307,29 @@ class HarmonicBalance:
         return out
 
     # ------------------------------------------------------------------ residual
-    def residual(self, U: np.ndarray, omega: float, Ul: np.ndarray, jacobian: bool = True):
-        """R = U - U_lin + G g(U); returns R, g, nonlinear element indices, their dg/dU blocks."""
+    def residual(self, U: np.ndarray, omega: float, Ul: np.ndarray, jacobian: bool = True,
+                 deferred: bool = False):
+        """R = U - U_lin + G g(U); returns R, g, nonlinear element indices, their dg/dU blocks.
+
+        With ``deferred`` the blocks come as a function computing them on its first call
+        (``FrictionContacts.evaluate``): what line searches use for their trials."""
         self.stats["residuals"] += 1
-        F, nl, DF = self.c.evaluate(self.to_contact(U), self.fourier, jacobian)
+        F, nl, DF = self.c.evaluate(self.to_contact(U), self.fourier, jacobian, deferred=True)
         g = self.from_contact(F) - self.k0[None, :] * U
         R = U - Ul + self.gapply(omega, g)
-        Dg = None
-        if jacobian and nl.size:
-            Dg = DF
-            nH = self.nH
-            k0 = self.k0.reshape(self.ne, 3)[nl]               # (k, 3)
-            diag = np.repeat(k0, nH, axis=1)                   # element layout d*nH + h
-            i = np.arange(3 * nH)
-            Dg[:, i, i] -= diag
-        return R, g, nl, Dg
+        if not (jacobian and nl.size):
+            return R, g, nl, None
+        Dg = once(lambda: self._dg_blocks(nl, DF()))
+        return R, g, nl, (Dg if deferred else Dg())
+
+    def _dg_blocks(self, nl: np.ndarray, DF: np.ndarray) -> np.ndarray:
+        """dg/dU = dF/dU - k0 of the elements nl (DF overwritten), element layout d*nH + h."""
+        self.stats["jacobians"] += 1
+        k0 = self.k0.reshape(self.ne, 3)[nl]                   # (k, 3)
+        diag = np.repeat(k0, self.nH, axis=1)
+        i = np.arange(3 * self.nH)
+        DF[:, i, i] -= diag
+        return DF
 
     def r_omega(self, omega: float, force: np.ndarray, g: np.ndarray) -> np.ndarray:
         """dR/dw at fixed U (central difference of the linear operators only, no AFT)."""
@@ -527,7 +541,7 @@ class HarmonicBalance:
         alpha, last = 1.0, (1.0, None)
         for _ in range(10):
             try:
-                trial = self.residual(U + alpha * dU, omega, Ul)
+                trial = self.residual(U + alpha * dU, omega, Ul, deferred=True)
             except CycleNotClosed:
                 alpha *= 0.5
                 continue
@@ -538,28 +552,64 @@ class HarmonicBalance:
         return last
 
     def newton(self, omega: float, force: np.ndarray, U0: np.ndarray):
-        """Damped Newton at fixed omega from U0; returns (U, residual, iterations)."""
+        """Damped Newton at fixed omega from U0; returns (U, residual, iterations, nonlinear
+        elements).
+
+        Gives up (ConvergenceError with the best iterate as ``best``) after ``max_iter``
+        iterations, or as soon as the residual has not halved in ``STALL_ITERATIONS`` or
+        ``STALL_LINE_SEARCHES`` line searches in a row found no decrease: at a kink of the
+        sampled friction law Newton can sit at one residual, line search after failed line
+        search (the quick model's top-level peaks: 1e-8 … 4e-6 for 30 iterations of ~7 trials
+        each), and the caller's fallbacks are cheaper than waiting."""
         Ul = self.ulin(omega, force)
         U = U0.copy()
         R, g, nl, Dg = self.residual(U, omega, Ul)
         r = np.linalg.norm(R)
         step = np.inf
+        best = (np.inf, None)            # (relative residual, (U, g, nl, iteration)) of the best
+        mark = (np.inf, 0)               # the last residual that halved the one before, iteration
+        no_descent = 0                   # line searches in a row that found no decrease
         for it in range(1, self.max_iter + 1):
+            rel = r / self._scale(U, Ul)
             if self.converged(r, self._scale(U, Ul), step):
                 self._last = (g, (nl, Dg))
-                return U, r / self._scale(U, Ul), it - 1, nl.size
+                return U, rel, it - 1, nl.size
+            if rel < best[0]:
+                best = (rel, (U, g, nl, it - 1))
+            if rel <= 0.5 * mark[0]:
+                mark = (rel, it - 1)
+            elif it - 1 - mark[1] >= STALL_ITERATIONS or no_descent >= STALL_LINE_SEARCHES:
+                raise ConvergenceError(
+                    f"Newton stalled at omega = {omega:.6g} rad/s: the residual did not halve in "
+                    f"{it - 1 - mark[1]} iterations ({no_descent} line searches in a row without "
+                    "descent)", best[0], self._best(omega, force, best))
             (dU,) = self.linsolve(omega, nl, Dg, [-R])
             alpha, trial = self._line_search(omega, Ul, U, dU, r)
             if trial is None:
                 raise ConvergenceError(f"Newton at omega = {omega:.6g} rad/s: the friction march "
-                                       "did not close at any line-search trial", r / self._scale(U, Ul))
+                                       "did not close at any line-search trial", best[0],
+                                       self._best(omega, force, best))
             step = alpha * np.linalg.norm(dU)
-            U, (R, g, nl, Dg), r = U + alpha * dU, trial, np.linalg.norm(trial[0])
+            r_new = np.linalg.norm(trial[0])
+            no_descent = no_descent + 1 if r_new > (1 - 1e-4 * alpha) * r else 0
+            U, (R, g, nl, Dg), r = U + alpha * dU, trial, r_new
+            Dg = Dg() if callable(Dg) else Dg
+        rel = r / self._scale(U, Ul)
         if self.converged(r, self._scale(U, Ul), step):
             self._last = (g, (nl, Dg))
-            return U, r / self._scale(U, Ul), self.max_iter, nl.size
+            return U, rel, self.max_iter, nl.size
+        if rel < best[0]:
+            best = (rel, (U, g, nl, self.max_iter))
         raise ConvergenceError(f"Newton did not converge at omega = {omega:.6g} rad/s in "
-                               f"{self.max_iter} iterations", r / self._scale(U, Ul))
+                               f"{self.max_iter} iterations", best[0], self._best(omega, force, best))
+
+    def _best(self, omega: float, force: np.ndarray, best) -> Solution | None:
+        """The Solution of Newton's best iterate (``best`` as kept by :meth:`newton`)."""
+        rel, it = best
+        if it is None:
+            return None
+        U, g, nl, k = it
+        return self.make_solution(omega, force, U, rel, k, nl.size, g=g)
 
     def make_solution(self, omega: float, force: np.ndarray, U: np.ndarray, res: float,
                       it: int, nnl: int, g: np.ndarray | None = None, jac=None) -> Solution:

@@ -280,9 +280,9 @@ class NonlinearModeProblem:
         U[1] = a * self.psi_j
         return U
 
-    def _eval(self, U, w, xi, a, jacobian=True):
+    def _eval(self, U, w, xi, a, jacobian=True, deferred=False):
         self.G.xi = xi
-        R, g, nl, Dg = self.ep.residual(U, w, self.ua(a), jacobian=jacobian)
+        R, g, nl, Dg = self.ep.residual(U, w, self.ua(a), jacobian=jacobian, deferred=deferred)
         r = ((self.lam_j - w * w + 1j * w * (self.c_j - xi)) * a
              + self.psi_j @ (g[1] - 1j * g[2])) / (self.lam_j * a)
         return R, r, g, nl, Dg
@@ -375,7 +375,7 @@ class NonlinearModeProblem:
         """Line-search trial: True if the merit falls enough (evaluation kept in _last_trial).
         A trial whose friction march does not close counts as a rejected one (shorter step)."""
         try:
-            ev = self._eval(U, w, xi, a)
+            ev = self._eval(U, w, xi, a, deferred=True)     # the Jacobian once accepted
         except CycleNotClosed:
             return False
         self._last_trial = (ev, self._merit(ev[0], ev[1], U, a))
@@ -421,6 +421,7 @@ class NonlinearModeProblem:
             step = alpha * max(np.linalg.norm(dU) / sU, abs(dw) / w, abs(dxi) / w)
             U, w, xi = Ut, wt, xt
             R, r, g, nl, Dg = ev
+            Dg = Dg() if callable(Dg) else Dg
             phi, sU = phit, sUt
         raise ConvergenceError(f"EPMC Newton did not converge at modal amplitude {a:.6g}", phi)
 

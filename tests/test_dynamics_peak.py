@@ -162,6 +162,48 @@ def test_refined_peak_does_not_depend_on_a_failed_strict_solve(monkeypatch) -> N
     assert calls["failed"] >= 3
 
 
+def test_a_stalled_tight_solve_gives_its_best_iterate_without_looser_solves(monkeypatch) -> None:
+    """A tight solve of the peak search that stalls (ConvergenceError carrying Newton's best
+    iterate) at an iterate meeting the sweep's tolerance gives that iterate: no looser solve is
+    run from the same start (it would retrace the same iterations). Here every other tight solve
+    'stalls' at its converged solution: the peak is the one without stalls, and no solve ran at
+    the looser tolerances."""
+    from hbm import ConvergenceError, HarmonicBalance
+    from fe_joint.study import frf as F
+    rm = _two_grounded_masses()
+    joint = _joint(2e3)
+    ref, _ = _sweep(rm, joint, 2.0)
+    solve = HarmonicBalance.solve
+    calls = {"tight": 0, "stalled": 0, "looser": 0, "in_peak": False}
+    refine = F._refine_peak
+
+    def in_peak(*a, **kw):
+        calls["in_peak"] = True
+        try:
+            return refine(*a, **kw)
+        finally:
+            calls["in_peak"] = False
+
+    def stalling(self, omega, force, guess=None):
+        if not calls["in_peak"]:
+            return solve(self, omega, force, guess)
+        if self.tol != F.PEAK_TOLERANCES[0]:
+            calls["looser"] += 1
+            return solve(self, omega, force, guess)
+        calls["tight"] += 1
+        s = solve(self, omega, force, guess)
+        if calls["tight"] % 2 == 0:
+            calls["stalled"] += 1
+            raise ConvergenceError("Newton stalled (test)", s.residual, best=s)
+        return s
+    monkeypatch.setattr(F, "_refine_peak", in_peak)
+    monkeypatch.setattr(HarmonicBalance, "solve", stalling)
+    got, _ = _sweep(rm, joint, 2.0)
+    assert got.peak_hz == pytest.approx(ref.peak_hz, rel=1e-10)
+    assert got.peak_amplitude == pytest.approx(ref.peak_amplitude, rel=1e-10)
+    assert calls["stalled"] >= 3 and calls["looser"] == 0
+
+
 def test_speed_tables_measure_the_frf_peak() -> None:
     """The harmonics/samples speed-against-error rows are the FRF peak (a short sweep through it,
     speed_error.PEAK_BAND), not a cold-start solve at the peak frequency (which landed on the lower

@@ -399,6 +399,7 @@ def test_compiled_repetition_equals_the_python_loop():
         tab = friction._StepTables(u, c.kt, c.mu, c.kn, c.n0, c.gap)
         final, hist, cyc, err, _ = c._forward(tab, False, 5000, True)
         rec, cyc2, dwh = c._repeat(tab, f, True, 5000)
+        dwh = dwh()
         assert err <= c.close_tol and np.array_equal(cyc, cyc2)
         periods.append(int(cyc.max()))
         assert np.array_equal(final.code, rec.code) and np.array_equal(final.evc, rec.evc)

@@ -166,6 +166,34 @@ def test_newton_failure_raises_with_residual():
     assert e.value.residual > 0
 
 
+@pytest.mark.parametrize("scale", [0.0, 0.03])
+def test_newton_stops_on_a_stall_and_gives_its_best_iterate(monkeypatch, scale):
+    """Newton gives up on a stall, not after max_iter: with a zero direction every line search
+    fails (10 trials each) and it stops after STALL_LINE_SEARCHES of them, carrying the start as
+    its best iterate; with 3 % of the Newton step the residual falls ≈ 3 % per iteration, every
+    first trial is accepted, and it stops when the residual has not halved in STALL_ITERATIONS,
+    carrying its last (best) iterate."""
+    from hbm.harmonic_balance import STALL_ITERATIONS, STALL_LINE_SEARCHES
+    M, K, C = free_free_pair()
+    hb = HarmonicBalance(LinearStructure(M, K, C), contact(0.2), harmonics=3, max_iter=40)
+    U0 = hb.to_contact(hb.ulin(8.0, 5.0 * F))    # the start: the linear base's response
+    linsolve = hb.linsolve
+    monkeypatch.setattr(hb, "linsolve", lambda *a: [scale * x for x in linsolve(*a)])
+    before = hb.stats["residuals"]
+    with pytest.raises(ConvergenceError, match="stalled") as e:
+        hb.solve(8.0, 5.0 * F)
+    best = e.value.best
+    assert best.residual == e.value.residual > hb.tol
+    assert max(STALL_ITERATIONS, STALL_LINE_SEARCHES) < hb.max_iter
+    if scale == 0.0:
+        assert hb.stats["residuals"] - before == 1 + 10 * STALL_LINE_SEARCHES
+        assert np.array_equal(best.contact, U0)
+    else:
+        assert hb.stats["residuals"] - before == 1 + STALL_ITERATIONS
+        assert best.iterations == STALL_ITERATIONS
+        assert not np.array_equal(best.contact, U0)
+
+
 @pytest.mark.parametrize("kw, msg", [
     (dict(kt=-1.0), "kt"), (dict(mu=-0.1), "mu"), (dict(n0=np.nan), "n0"),
     (dict(kn=np.ones(3)), "kn"), (dict(dofs=np.zeros((2, 3))), "dofs"),

@@ -438,7 +438,11 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, max_solves: int = 80):
     peak; one that fails at the tight tolerances is repeated at hbm's strict and then at the
     sweep's tolerances, and from a looser solution once more at the tight ones (when that fails
     too, the looser amplitude is used: at 1e-9 it may be off by ≈ 2.5e-8 on the resonator). A
-    point where all fail counts as one below the peak (beyond a fold): a bracket end.
+    failed solve's best iterate (Newton stops on a stall, ``HarmonicBalance.newton``) that meets
+    a looser tolerance is taken as that tolerance's solution: repeating the solve would retrace
+    the same iterations (on the quick model's 2-rank top-level baseline peak those repeats and
+    the stalls took most of 10 minutes). A point where all fail counts as one below the peak
+    (beyond a fold): a bracket end.
 
     Args:
         hb: the HarmonicBalance of the curve (its tolerances are restored on return).
@@ -455,22 +459,37 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, max_solves: int = 80):
     count = [0]
 
     def attempt(w: float, guess, tols):
+        """(Solution or None, the failed solve's best iterate or None)."""
         hb.tol, hb.krylov_tol = tols
         try:
-            return hb.solve(w, force, guess=guess)
-        except ConvergenceError:
-            return None
+            return hb.solve(w, force, guess=guess), None
+        except ConvergenceError as e:
+            return None, e.best
 
     def amp(w: float, guess):
         """(X, Solution) at w, or (-inf, None) when no solve converges."""
         count[0] += 1
-        s = attempt(w, guess, PEAK_TOLERANCES)
+        s, best = attempt(w, guess, PEAK_TOLERANCES)
+        if s is None and best is not None and best.residual <= ladder[-1][0]:
+            # Newton stalled (a kink of the sampled friction law) at an iterate that meets a
+            # looser rung: a looser solve from the same start would retrace the same iterations
+            # to about there, and a tight one from it stalls where this one did
+            s = best
+        # GMRES tolerances of Newton runs from this start that failed: another run with the same
+        # one takes the same iterations (the Newton tolerance only decides where to stop)
+        failed = {PEAK_TOLERANCES[1]} if best is not None else set()
         for tols in ladder[1:]:
             if s is not None:
                 break
-            s = attempt(w, guess, tols)
+            if tols[1] in failed:
+                continue
+            s, best = attempt(w, guess, tols)
+            if best is not None:
+                failed.add(tols[1])
             if s is not None:      # tight again from there, else the looser solution
-                s = attempt(w, s, PEAK_TOLERANCES) or s
+                s = attempt(w, s, PEAK_TOLERANCES)[0] or s
+            elif best is not None and best.residual <= ladder[-1][0]:
+                s = best
         return (-np.inf, None) if s is None else (s.amplitude(dof), s)
 
     try:
