@@ -2,15 +2,16 @@
 """Benchmark of the whole study (issue 16): `fe-joint run` from scratch, this checkout against a
 peer commit in the same run, per stage and per curve.
 
-Each code tree runs the same preset into a fresh folder (artifacts cleared), one after the other,
-under ``mpirun -n NP`` (one single-threaded rank per core, as ``scripts/run`` does), and the
-tables come from what the runs wrote (``timings.json``: stage, curve and backbone wall times;
+Each code tree runs the same preset, one after the other, under ``mpirun -n NP`` (one
+single-threaded rank per core, as ``scripts/run`` does): this checkout from scratch (artifacts
+cleared), the peer from a copy of its mesh, fe and contact stages (so both solve the same
+reduced model; ``--own-model``: from scratch too). The tables come from what the runs wrote (``timings.json``: stage, curve and backbone wall times;
 ``summary.json``: each curve's peak and point count). The peer is checked out with ``git
 worktree`` into a temporary folder and run with the same interpreter (``PYTHONPATH`` puts its
 packages first); its numba cache is its own.
 
 Usage: python scripts/bench_study.py [--preset quick] [--np 2] [--peer REV] [--out DIR]
-       [--keep] [--timeout S]
+       [--keep] [--timeout S] [--own-model]
 
 Prints markdown: the wall time of each run and of each stage, then every curve's time, points and
 peak with the ratio to the peer and the peak's relative difference to the peer's (issue 16 asks
@@ -36,8 +37,6 @@ PEAK_RTOL_HZ, PEAK_RTOL_AMPLITUDE = 1e-4, 1e-3
 def run_tree(tree: Path, preset: str, np_: int, out: Path, timeout: float | None) -> float | None:
     """``fe-joint run --preset`` of the code in ``tree`` into a fresh ``out``; wall time, s (None:
     stopped after ``timeout`` s)."""
-    if out.exists():
-        shutil.rmtree(out)
     env = dict(os.environ, PYTHONPATH=str(tree), OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
                OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1", MPLBACKEND="Agg")
     cmd = [sys.executable, "-m", "fe_joint.cli", "run", "--preset", preset, "--out", str(out),
@@ -52,6 +51,23 @@ def run_tree(tree: Path, preset: str, np_: int, out: Path, timeout: float | None
         subprocess.run(["pkill", "-f", f"--out {out}"], check=False)
         return None
     return time.perf_counter() - t
+
+
+def seed_from(src: Path, out: Path) -> None:
+    """Start ``out`` from the mesh, fe and contact stages of the finished run ``src`` (their
+    folders, manifests and log lines), so that the next run solves the same reduced model."""
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
+    for name in ("mesh", "fe", "contact"):
+        shutil.copytree(src / name, out / name)
+    (out / "stages").mkdir()
+    for name in ("mesh", "fe", "contact"):
+        shutil.copy2(src / "stages" / f"{name}.json", out / "stages" / f"{name}.json")
+    log = [ln for ln in (src / "stage_log.jsonl").read_text().splitlines()
+           if json.loads(ln).get("stage") in ("mesh", "fe", "contact")]
+    (out / "stage_log.jsonl").write_text("\n".join(log) + "\n")
+    shutil.copy2(src / "case.toml", out / "case.toml")
 
 
 def warm_up(tree: Path) -> None:
@@ -135,6 +151,10 @@ def main(argv=None) -> int:
     p.add_argument("--peer", default=None, help="a git revision to run as the peer (e.g. main~3)")
     p.add_argument("--out", default=None, help="where the runs go (default: a temporary folder)")
     p.add_argument("--keep", action="store_true", help="keep the runs' folders")
+    p.add_argument("--own-model", action="store_true",
+                   help="every tree builds its own model (default: the peer starts from this "
+                        "checkout's mesh, fe and contact stages: FE on 2 ranks is not bit-"
+                        "reproducible, and the top-level peaks are sensitive to its round-off)")
     p.add_argument("--timeout", type=float, default=None,
                    help="stop a run after this many seconds (its finished curves are compared)")
     a = p.parse_args(argv)
@@ -158,8 +178,15 @@ def main(argv=None) -> int:
     try:
         for tree in trees.values():
             warm_up(tree)
+        first = None
         for lb, tree in trees.items():
             out = base / ("run-" + lb.replace(" ", "-"))
+            if first is None or a.own_model:
+                if out.exists():
+                    shutil.rmtree(out)
+                first = first or out
+            else:
+                seed_from(first, out)
             walls[lb] = run_tree(tree, a.preset, a.np, out, a.timeout)
             runs[lb] = results(out)
             print(f"[bench_study] {lb}: " + (f"{walls[lb]:.1f} s" if walls[lb] is not None else
