@@ -161,8 +161,12 @@ def _modal_apply(Psi: np.ndarray, Ls: list, v: np.ndarray) -> np.ndarray:
 
 #: Newton gives up when its residual has not halved in this many iterations (see ``newton``) ...
 STALL_ITERATIONS = 10
-#: ... or after this many line searches in a row found no decrease (10 trials each)
+#: ... or after this many line searches in a row found no decrease (10 trials each) ...
 STALL_LINE_SEARCHES = 3
+#: ... once its best relative residual is below this: the end game, where a stall is a kink of
+#: the sampled friction law; far from the solution damped Newton may crawl before it converges
+#: (the friction demo's oscillator: 3 failed line searches at 0.68, then converged)
+STALL_BELOW = 1e-5
 
 
 class _PreconditionerCache:
@@ -556,11 +560,12 @@ class HarmonicBalance:
         elements).
 
         Gives up (ConvergenceError with the best iterate as ``best``) after ``max_iter``
-        iterations, or as soon as the residual has not halved in ``STALL_ITERATIONS`` or
-        ``STALL_LINE_SEARCHES`` line searches in a row found no decrease: at a kink of the
-        sampled friction law Newton can sit at one residual, line search after failed line
-        search (the quick model's top-level peaks: 1e-8 … 4e-6 for 30 iterations of ~7 trials
-        each), and the caller's fallbacks are cheaper than waiting."""
+        iterations, or, once the relative residual has been below ``STALL_BELOW``, as soon as it
+        has not halved in ``STALL_ITERATIONS`` or ``STALL_LINE_SEARCHES`` line searches in a row
+        found no decrease: at a kink of the sampled friction law Newton can sit at one residual,
+        line search after failed line search (the quick model's top-level peaks: 1e-8 … 4e-6
+        for 30 iterations of ~7 trials each), and the caller's fallbacks are cheaper than
+        waiting."""
         Ul = self.ulin(omega, force)
         U = U0.copy()
         R, g, nl, Dg = self.residual(U, omega, Ul)
@@ -578,7 +583,8 @@ class HarmonicBalance:
                 best = (rel, (U, g, nl, it - 1))
             if rel <= 0.5 * mark[0]:
                 mark = (rel, it - 1)
-            elif it - 1 - mark[1] >= STALL_ITERATIONS or no_descent >= STALL_LINE_SEARCHES:
+            elif best[0] <= STALL_BELOW and (it - 1 - mark[1] >= STALL_ITERATIONS
+                                             or no_descent >= STALL_LINE_SEARCHES):
                 raise ConvergenceError(
                     f"Newton stalled at omega = {omega:.6g} rad/s: the residual did not halve in "
                     f"{it - 1 - mark[1]} iterations ({no_descent} line searches in a row without "

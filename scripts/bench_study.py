@@ -11,7 +11,7 @@ worktree`` into a temporary folder and run with the same interpreter (``PYTHONPA
 packages first); its numba cache is its own.
 
 Usage: python scripts/bench_study.py [--preset quick] [--np 2] [--peer REV] [--out DIR]
-       [--keep] [--timeout S] [--own-model]
+       [--keep] [--timeout S] [--own-model] [--model RUN]
 
 Prints markdown: the wall time of each run and of each stage, then every curve's time, points and
 peak with the ratio to the peer and the peak's relative difference to the peer's (issue 16 asks
@@ -48,7 +48,7 @@ def run_tree(tree: Path, preset: str, np_: int, out: Path, timeout: float | None
         subprocess.run(cmd, env=env, cwd=tree, check=True, stdout=subprocess.DEVNULL,
                        timeout=timeout, start_new_session=True)
     except subprocess.TimeoutExpired:
-        subprocess.run(["pkill", "-f", f"--out {out}"], check=False)
+        subprocess.run(["pkill", "-f", "--", f"--out {out}"], check=False)
         return None
     return time.perf_counter() - t
 
@@ -151,6 +151,8 @@ def main(argv=None) -> int:
     p.add_argument("--peer", default=None, help="a git revision to run as the peer (e.g. main~3)")
     p.add_argument("--out", default=None, help="where the runs go (default: a temporary folder)")
     p.add_argument("--keep", action="store_true", help="keep the runs' folders")
+    p.add_argument("--model", default=None,
+                   help="a finished run whose mesh, fe and contact stages every tree starts from")
     p.add_argument("--own-model", action="store_true",
                    help="every tree builds its own model (default: the peer starts from this "
                         "checkout's mesh, fe and contact stages: FE on 2 ranks is not bit-"
@@ -160,6 +162,8 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.np < 1:
         p.error(f"--np {a.np}: must be at least 1")
+    if a.model and not (Path(a.model) / "stages" / "contact.json").is_file():
+        p.error(f"--model {a.model}: not a run with a finished contact stage")
     base = Path(a.out) if a.out else Path(tempfile.mkdtemp(prefix="bench_study_"))
     base.mkdir(parents=True, exist_ok=True)
     trees = {"this": ROOT}
@@ -178,7 +182,7 @@ def main(argv=None) -> int:
     try:
         for tree in trees.values():
             warm_up(tree)
-        first = None
+        first = Path(a.model) if a.model else None
         for lb, tree in trees.items():
             out = base / ("run-" + lb.replace(" ", "-"))
             if first is None or a.own_model:
@@ -194,7 +198,8 @@ def main(argv=None) -> int:
     finally:
         if wt is not None and not a.keep:
             subprocess.run(["git", "worktree", "remove", "--force", str(wt)], cwd=ROOT)
-    print(f"\n### The study, --preset {a.preset}, {a.np} rank(s), from scratch\n")
+    print(f"\n### The study, --preset {a.preset}, {a.np} rank(s), "
+          + (f"on the model of {a.model}\n" if a.model else "from scratch\n"))
     ok = table(runs, walls)
     if not a.keep and not a.out:
         shutil.rmtree(base, ignore_errors=True)

@@ -168,22 +168,28 @@ def test_newton_failure_raises_with_residual():
 
 @pytest.mark.parametrize("scale", [0.0, 0.03])
 def test_newton_stops_on_a_stall_and_gives_its_best_iterate(monkeypatch, scale):
-    """Newton gives up on a stall, not after max_iter: with a zero direction every line search
-    fails (10 trials each) and it stops after STALL_LINE_SEARCHES of them, carrying the start as
-    its best iterate; with 3 % of the Newton step the residual falls ≈ 3 % per iteration, every
-    first trial is accepted, and it stops when the residual has not halved in STALL_ITERATIONS,
-    carrying its last (best) iterate."""
-    from hbm.harmonic_balance import STALL_ITERATIONS, STALL_LINE_SEARCHES
+    """Newton gives up on a stall near the solution, not after max_iter. From the solution moved
+    by 1e-7 (relative residual below STALL_BELOW) with an unreachable tolerance: with a zero
+    direction every line search fails (10 trials each) and it stops after STALL_LINE_SEARCHES of
+    them, carrying the start as its best iterate; with 3 % of the Newton step the residual falls
+    ≈ 3 % per iteration, every first trial is accepted, and it stops when the residual has not
+    halved in STALL_ITERATIONS, carrying its last (best) iterate. Far from the solution (the
+    linear start, residual ≈ 1) the same zero direction runs to max_iter."""
+    from types import SimpleNamespace
+    from hbm.harmonic_balance import STALL_BELOW, STALL_ITERATIONS, STALL_LINE_SEARCHES
     M, K, C = free_free_pair()
     hb = HarmonicBalance(LinearStructure(M, K, C), contact(0.2), harmonics=3, max_iter=40)
-    U0 = hb.to_contact(hb.ulin(8.0, 5.0 * F))    # the start: the linear base's response
+    sol = hb.solve(8.0, 5.0 * F)
+    U0 = sol.contact * (1 + 1e-7)
+    hb.tol = 1e-15                               # unreachable: only a stall ends it
     linsolve = hb.linsolve
     monkeypatch.setattr(hb, "linsolve", lambda *a: [scale * x for x in linsolve(*a)])
     before = hb.stats["residuals"]
     with pytest.raises(ConvergenceError, match="stalled") as e:
-        hb.solve(8.0, 5.0 * F)
+        hb.solve(8.0, 5.0 * F, guess=SimpleNamespace(contact=U0))
     best = e.value.best
-    assert best.residual == e.value.residual > hb.tol
+    assert best.residual == e.value.residual
+    assert hb.tol < best.residual <= STALL_BELOW
     assert max(STALL_ITERATIONS, STALL_LINE_SEARCHES) < hb.max_iter
     if scale == 0.0:
         assert hb.stats["residuals"] - before == 1 + 10 * STALL_LINE_SEARCHES
@@ -192,6 +198,11 @@ def test_newton_stops_on_a_stall_and_gives_its_best_iterate(monkeypatch, scale):
         assert hb.stats["residuals"] - before == 1 + STALL_ITERATIONS
         assert best.iterations == STALL_ITERATIONS
         assert not np.array_equal(best.contact, U0)
+        return
+    before = hb.stats["residuals"]
+    with pytest.raises(ConvergenceError, match="in 40 iterations"):
+        hb.solve(8.0, 5.0 * F)                   # from the linear start: far, no stall exit
+    assert hb.stats["residuals"] - before == 1 + 10 * hb.max_iter
 
 
 @pytest.mark.parametrize("kw, msg", [
