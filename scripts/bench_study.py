@@ -162,6 +162,8 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.np < 1:
         p.error(f"--np {a.np}: must be at least 1")
+    if a.timeout is not None and not a.timeout > 0:
+        p.error(f"--timeout {a.timeout}: must be a positive number of seconds")
     if a.model and not (Path(a.model) / "stages" / "contact.json").is_file():
         p.error(f"--model {a.model}: not a run with a finished contact stage")
     base = Path(a.out) if a.out else Path(tempfile.mkdtemp(prefix="bench_study_"))
