@@ -137,9 +137,9 @@ class ForcedPath(HarmonicBalance):
         super().__init__(s, c, **kw)
         self.gmres = gmres
 
-    def _reduced(self, omega, nl, Dg, dense=False):
+    def _reduced(self, omega, nl, Dg, dense=False, out=None):
         self.dense_limit = -1 if self.gmres(omega) else 10**9
-        return super()._reduced(omega, nl, Dg, dense)
+        return super()._reduced(omega, nl, Dg, dense, out)
 
 
 def alternating(omega: float) -> bool:

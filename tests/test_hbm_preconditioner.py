@@ -37,9 +37,48 @@ def _parts(hb, nl, omega):
     return hb.G.R[np.ix_(cn, cn)], hb.G.Psi[cn], Ls
 
 
+def _real_receptance(hb, omega, cn):
+    """The whole real harmonic receptance on cn: cosine/sine blocks of each complex G_h."""
+    p, nH = cn.size, hb.nH
+    G = np.zeros((nH * p, nH * p))
+    G[:p, :p] = hb.G.matrix(0, omega, cn, cn).real
+    for h in range(1, hb.H + 1):
+        Gh = hb.G.matrix(h, omega, cn, cn)
+        a, b = (2 * h - 1) * p, 2 * h * p
+        G[a:a + p, a:a + p], G[a:a + p, b:b + p] = Gh.real, Gh.imag
+        G[b:b + p, a:a + p], G[b:b + p, b:b + p] = -Gh.imag, Gh.real
+    return G
+
+
+def test_the_dense_jacobian_is_identity_plus_receptance_times_friction_jacobian():
+    # J = I + G D with G the whole real receptance and D scattered from the element blocks (the
+    # element layout d n_H + h to the reduced layout h 3k + 3e + d), against the blockwise
+    # product of ``_dense_jacobian``, also when written into a view of a larger (bordered) array
+    for H in (1, 3):
+        hb, rng = _solver(H=H)
+        nl = np.array([1, 2, 4, 7])
+        k, nH = nl.size, 2 * H + 1
+        cn = (3 * nl[:, None] + np.arange(3)).ravel()
+        omega = 0.8 * np.sqrt(hb.G.lam[~hb.G.rigid][0])
+        Dg = rng.normal(scale=30.0, size=(k, 3 * nH, 3 * nH))
+        D = np.zeros((nH * 3 * k,) * 2)
+        for e in range(k):
+            for i in range(3 * nH):
+                for j in range(3 * nH):
+                    (di, hi), (dj, hj) = divmod(i, nH), divmod(j, nH)
+                    D[hi * 3 * k + 3 * e + di, hj * 3 * k + 3 * e + dj] = Dg[e, i, j]
+        ref = np.eye(D.shape[0]) + _real_receptance(hb, omega, cn) @ D
+        J = hb._dense_jacobian(omega, cn, Dg)
+        assert np.abs(J - ref).max() <= 1e-12 * np.abs(ref).max()
+        big = np.full((D.shape[0] + 1,) * 2, np.nan)
+        hb._dense_jacobian(omega, cn, Dg, out=big[:-1, :-1])
+        assert np.array_equal(big[:-1, :-1], J) and np.isnan(big[-1]).all() and np.isnan(big[:, -1]).all()
+
+
 def test_the_preconditioner_is_the_inverse_on_the_structure_it_keeps():
-    # J formed densely from the complex receptance blocks (HarmonicBalance._gbig), independently
-    # of the preconditioner's Woodbury correction, explicit mean inverse and Gauss-Seidel sweep
+    # J formed densely from the complex receptance blocks (HarmonicBalance._dense_jacobian,
+    # checked against the whole real receptance below), independently of the preconditioner's
+    # Woodbury correction, explicit mean inverse and Gauss-Seidel sweep
     for H in (1, 3):
         hb, rng = _solver(H=H)
         nl = np.array([0, 2, 3, 5, 7])
