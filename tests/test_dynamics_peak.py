@@ -267,9 +267,16 @@ def test_speed_rows_as_queue_jobs_give_the_sequential_tables(tmp_path) -> None:
            se.MESH_TABLE: se.mesh_rows(models, level, SETTINGS, ref.peak_hz)}
     jobs = se.speed_jobs([], knobs, len(models), (1, 32))
     assert jobs[0] == se.SpeedJob("harmonics", 1, harmonics=3, samples=256)   # the costliest first
+    # one sweep per (model, H, n_t): the case mesh's row is the samples row of the study's knobs
+    sweeps = [(j.model if j.table == "mesh" else -1, j.harmonics or 1, j.samples or 32)
+              for j in jobs if j.table != "bem" and not j.peak_of]
+    assert len(sweeps) == len(set(sweeps)) == 5
+    assert [j.peak_of for j in jobs if j.table == "mesh"] == ["", "samples-1"]
     f_case = stuck_modes(rm.K, rm.M, rm.pair_dofs, case_joint).frequency
 
-    def run(job):
+    def run(job):          # as the speed stage's
+        if job.peak_of:
+            return se.own_fields(job, models)
         if job.table == "mesh":
             return se.mesh_row(models[job.model], f_case, level, SETTINGS, ref.peak_hz)
         return se.hbm_row(rm, case_joint, level, SETTINGS, ref.peak_hz, job.harmonics, job.samples)

@@ -351,6 +351,8 @@ def _speed_tables(ctx: StageContext) -> dict:
     jobs = se.speed_jobs(grids, knobs, len(models), (settings.harmonics, settings.samples))
 
     def run(job: se.SpeedJob) -> dict:
+        if job.peak_of:
+            return se.own_fields(job, models)
         if job.table == "bem":
             return se.bem_row(rm, c, job.grid)
         if job.table == "mesh":

@@ -131,13 +131,9 @@ def mesh_row(model: tuple, f_stuck_case: float, level: float, settings: SweepSet
         amplitude, FE and HBM times, points.
     """
     from hbm import ConvergenceError
-
-    from ..model.joint import stuck_modes
-    size, rm, fe_s, joint = model
-    f_st = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency
-    out = {"lap mesh [mm]": size, "elements": int(rm.n_pairs),
-           "closed": int(np.sum(np.asarray(rm.preload_status) != 0)), "reduced DOFs": int(rm.n_dofs),
-           "stuck [Hz]": f_st, "FE time [s]": fe_s}
+    _, rm, _, joint = model
+    out = mesh_fields(model)
+    f_st = out["stuck [Hz]"]
     t0 = time.perf_counter()
     try:
         cr = frf(rm, joint, level, f_peak_hz * f_st / f_stuck_case,
@@ -148,6 +144,20 @@ def mesh_row(model: tuple, f_stuck_case: float, level: float, settings: SweepSet
         out.update({"peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
                     "HBM time [s]": time.perf_counter() - t0, "points": 0, "note": f"not found ({e})"})
     return out
+
+
+def mesh_fields(model: tuple) -> dict:
+    """The element-count row's fields of the model itself (no sweep): lap mesh size, elements,
+    closed pairs, reduced DOFs, stuck frequency, FE time.
+
+    Args:
+        model: (lap mesh size mm, ReducedModel, FE seconds, baseline JointModel on it).
+    """
+    from ..model.joint import stuck_modes
+    size, rm, fe_s, joint = model
+    return {"lap mesh [mm]": size, "elements": int(rm.n_pairs),
+            "closed": int(np.sum(np.asarray(rm.preload_status) != 0)), "reduced DOFs": int(rm.n_dofs),
+            "stuck [Hz]": stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency, "FE time [s]": fe_s}
 
 
 def mesh_errors(rows: list[dict]) -> list[dict]:
@@ -197,6 +207,10 @@ class SpeedJob:
         grid: BEM grid n (table "bem").
         harmonics, samples: H and n_t (tables "harmonics" and "samples").
         model: index into the stage's reduced models, the case's own last (table "mesh").
+        peak_of: name of the job whose sweep this row's peak is (the same sweep: the harmonics
+            row at the samples table's H, and the case mesh's row at the study's H and n_t);
+            such a job computes only its own fields (:func:`own_fields`), "" for a row with
+            its own sweep.
     """
     table: str
     index: int
@@ -204,6 +218,7 @@ class SpeedJob:
     harmonics: int = 0
     samples: int = 0
     model: int = -1
+    peak_of: str = ""
 
     @property
     def name(self) -> str:
@@ -220,15 +235,25 @@ def speed_jobs(grids, knobs: tuple[list, list] | None, n_models: int,
             case's own last; study_knobs: the study's (H, n_t), those of the element-count rows.
     """
     jobs = [SpeedJob("bem", i, grid=n) for i, n in enumerate(grids)]
+    # a row whose sweep is another row's (same model, H and n_t) takes that row's peak: the
+    # default case's harmonics row H = 3, n_t = 256 is the samples row n_t = 256, and the case
+    # mesh's row the samples row of the study's n_t (two sweeps of 38-46 s on the default model)
+    sweeps = {}
     if knobs is not None:
-        jobs += [SpeedJob("harmonics", i, harmonics=H, samples=nt) for i, (H, nt) in enumerate(knobs[0])]
         jobs += [SpeedJob("samples", i, harmonics=H, samples=nt) for i, (H, nt) in enumerate(knobs[1])]
-    jobs += [SpeedJob("mesh", i, model=i) for i in range(n_models)]
+        sweeps = {(j.harmonics, j.samples): j.name for j in jobs if j.table == "samples"}
+        jobs += [SpeedJob("harmonics", i, harmonics=H, samples=nt, peak_of=sweeps.get((H, nt), ""))
+                 for i, (H, nt) in enumerate(knobs[0])]
+    jobs += [SpeedJob("mesh", i, model=i,
+                      peak_of=sweeps.get(study_knobs, "") if i == n_models - 1 else "")
+             for i in range(n_models)]
     # a sweep's cost grows like (2H + 1)·n_t (the march) and the element count (a coarser mesh
-    # has fewer elements); the BEM rows (seconds) go last
+    # has fewer elements); the BEM rows (seconds) and the rows without a sweep go last
     H, nt = study_knobs
 
     def cost(j: SpeedJob) -> float:
+        if j.peak_of:
+            return 0.0
         if j.table == "bem":
             return j.grid ** 2 / 1e6
         if j.table == "mesh":
@@ -248,7 +273,10 @@ def assemble_tables(jobs: list[SpeedJob], rows: dict[str, dict], h_ref: int) -> 
     """
     by = {}
     for j in sorted(jobs, key=lambda j: (j.table, j.index)):
-        by.setdefault(j.table, []).append(dict(rows[j.name]))
+        row = dict(rows[j.name])
+        if j.peak_of:
+            row.update(_peak_fields(rows[j.peak_of], j.table))
+        by.setdefault(j.table, []).append(row)
     out = {}
     if "bem" in by:
         out["bem"] = bem_errors(by["bem"])
@@ -257,6 +285,22 @@ def assemble_tables(jobs: list[SpeedJob], rows: dict[str, dict], h_ref: int) -> 
         out[SAMPLES_TABLE] = _errors(by["samples"], "finest")
     if "mesh" in by:
         out[MESH_TABLE] = mesh_errors(by["mesh"])
+    return out
+
+
+def own_fields(job: SpeedJob, models: list) -> dict:
+    """The fields of a row whose peak is another row's sweep (``job.peak_of``): H and n_t, or the
+    model's own fields (:func:`mesh_fields`)."""
+    if job.table == "mesh":
+        return mesh_fields(models[job.model])
+    return {"harmonics": job.harmonics, "samples": job.samples}
+
+
+def _peak_fields(source: dict, table: str) -> dict:
+    """The sweep's fields of a finished row, named as ``table``'s rows name them."""
+    out = {k: source[k] for k in ("peak [Hz]", "amplitude [µm]", "points", "note") if k in source}
+    t = source.get("time [s]", source.get("HBM time [s]"))
+    out["HBM time [s]" if table == "mesh" else "time [s]"] = t
     return out
 
 
