@@ -57,7 +57,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import ConvergenceError, CycleNotClosed
-from .harmonic_balance import Solution
+from .harmonic_balance import STALL_BELOW, STALL_ITERATIONS, Solution
 from .structure import Receptance
 
 
@@ -390,9 +390,23 @@ class NonlinearModeProblem:
         R, r, g, nl, Dg = self._eval(U, w, xi, a)
         phi, sU = self._merit(R, r, U, a)
         step = np.inf
+        best = (np.inf, None)          # the best iterate, (merit, (U, w, xi, phi, it, g, nl))
+        mark = (np.inf, 0)             # the last merit that halved the one before, iteration
         for it in range(self.max_iter + 1):
             if phi <= self.tol or (phi <= 10 * self.tol and step <= 10 * self.tol):
                 return U, w, xi, phi, it, g, nl
+            if phi < best[0]:
+                best = (phi, (U, w, xi, phi, it, g, nl))
+            if phi <= 0.5 * mark[0]:
+                mark = (phi, it)
+            elif best[0] <= STALL_BELOW and it - mark[1] >= STALL_ITERATIONS:
+                # the forced Newton's stall rule: near a kink of the sampled friction law the
+                # merit can crawl for all max_iter iterations (the stiff layer joint's backbone
+                # of the default model: 20-50 s per failed amplitude); the floor rule below
+                # applies to the best iterate
+                if best[0] <= STAGNATION_FLOOR * self.tol:
+                    return best[1]
+                break
             if it == self.max_iter:
                 break
             (dRw, dSw), (dRx, dSx) = self._param_derivs(g, w, xi, a)
@@ -414,16 +428,17 @@ class NonlinearModeProblem:
                     break
                 alpha *= 0.5
             else:
-                if phi <= STAGNATION_FLOOR * self.tol:
+                if best[0] <= STAGNATION_FLOOR * self.tol:
                     # no descent left at a floor of the nonsmooth residual (module constant)
-                    return U, w, xi, phi, it, g, nl
+                    return best[1]
                 break
             step = alpha * max(np.linalg.norm(dU) / sU, abs(dw) / w, abs(dxi) / w)
             U, w, xi = Ut, wt, xt
             R, r, g, nl, Dg = ev
             Dg = Dg() if callable(Dg) else Dg
             phi, sU = phit, sUt
-        raise ConvergenceError(f"EPMC Newton did not converge at modal amplitude {a:.6g}", phi)
+        raise ConvergenceError(f"EPMC Newton did not converge at modal amplitude {a:.6g}",
+                               min(phi, best[0]))
 
     # ------------------------------------------------------------------ post-processing
     def modal_coordinates(self, g: np.ndarray, w: float, xi: float, a: float) -> np.ndarray:

@@ -361,3 +361,46 @@ def test_backbone_accepts_a_newton_stalled_at_a_residual_floor():
     assert np.max(bb.residual) > 1e-9                       # accepted above tol, at the floor
     assert np.allclose(bb.omega, ref.omega, rtol=1e-6, atol=0)
     assert np.allclose(bb.zeta, ref.zeta, rtol=1e-6, atol=0)
+
+
+def test_epmc_newton_stops_on_a_stall_near_the_solution(monkeypatch):
+    """The EPMC Newton uses the forced Newton's stall rule: once its merit is below STALL_BELOW
+    and has not halved in STALL_ITERATIONS iterations it stops, not after max_iter. From a
+    converged point moved by 1e-7, with 3 % of each Newton step (the merit falls ≈ 3 % per
+    iteration, every first trial accepted): with an unreachable tolerance it raises with its best
+    merit after STALL_ITERATIONS iterations; with a tolerance whose stagnation floor
+    (STAGNATION_FLOOR × tol) lies above that best merit it returns the best iterate instead."""
+    from hbm.errors import ConvergenceError
+    from hbm.harmonic_balance import STALL_BELOW, STALL_ITERATIONS
+    from hbm.nonlinear_mode import STAGNATION_FLOOR
+    hb = jenkins_1dof(3, 256, tol=1e-11)
+    prob = NonlinearModeProblem(hb, 0, max_iter=40)
+    a = 0.5
+    U, w, xi = prob.linear_point(a)
+    U, w, xi, phi, *_ = prob.solve(a, U, w, xi)
+    assert phi <= 1e-11
+    linsolve = prob.ep.linsolve
+    monkeypatch.setattr(prob.ep, "linsolve", lambda *x: [0.03 * v for v in linsolve(*x)])
+    merits = []
+    merit = prob._merit
+
+    def recorded(*x):
+        out = merit(*x)
+        merits.append(out[0])
+        return out
+    monkeypatch.setattr(prob, "_merit", recorded)
+    start = (U * (1 + 1e-7), w * (1 + 1e-7), xi)
+    prob.tol = 1e-15
+    with pytest.raises(ConvergenceError, match="did not converge") as e:
+        prob.solve(a, *start)
+    assert prob.tol < e.value.residual == min(merits) <= STALL_BELOW
+    # every trial accepted (one merit per iteration); the last merit that halved its mark
+    mark, at = np.inf, 0
+    for i, m in enumerate(merits):
+        if m <= 0.5 * mark:
+            mark, at = m, i
+    assert len(merits) - 1 - at == STALL_ITERATIONS and len(merits) < prob.max_iter
+    n = len(merits)
+    prob.tol = 1.5 * e.value.residual / STAGNATION_FLOOR
+    got = prob.solve(a, *start)
+    assert got[3] == e.value.residual and got[4] == n - 1      # the same (last, best) iterate
