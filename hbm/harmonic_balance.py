@@ -169,10 +169,13 @@ STALL_LINE_SEARCHES = 3
 STALL_BELOW = 1e-5
 
 
-#: after GMRES failed on a reduced system (its restarts exhausted, then the dense LU), the next
-#: this many systems of at least DENSE_FALLBACK_SIZE times its size go to the LU directly: where
-#: the preconditioner fails it keeps failing (the stiff layer joint's backbone on the default
-#: model: 12 of 13 Newton systems at 321 elements each paid 600 GMRES iterations before the LU)
+#: after GMRES failed on two reduced systems in a row (its restarts exhausted, then the dense
+#: LU), the next this many systems of at least DENSE_FALLBACK_SIZE times the last one's size go to
+#: the LU directly: where the preconditioner fails it keeps failing (the stiff layer joint's
+#: backbone on the default model: 12 of 13 Newton systems at 321 elements each paid 600 GMRES
+#: iterations before the LU). One failure is not enough: on the forced top-level curves a
+#: failure is isolated, and ten 7413-unknown LUs (6 s each) instead of GMRES solves (0.3 s)
+#: made the default baseline@L2 curve 8 % slower.
 DENSE_AFTER_FALLBACK = 10
 DENSE_FALLBACK_SIZE = 0.9
 
@@ -254,7 +257,8 @@ class HarmonicBalance:
         self.G = Receptance(s, self.B, self.k0)
         self.ne, self.nc = c.ne, 3 * c.ne
         self._pre = None          # cached preconditioner (GMRES path)
-        self._dense_left, self._dense_size = 0, 0     # dense solves owed to the last fallback
+        self._dense_left, self._dense_size = 0, 0     # dense solves owed to the last fallbacks
+        self._gmres_failed = False                    # the last GMRES solve failed
         self.krylov_tol = float(krylov_tol)
         self.stats = {"residuals": 0, "jacobians": 0, "linear_solves": 0, "gmres_iterations": 0, "sign_factorizations": 0,
                       "dense_fallbacks": 0, "dense_after_fallback": 0, "preconditioners": 0}
@@ -449,6 +453,7 @@ class HarmonicBalance:
             X[:, i] = x
         if self._pre is not None:
             self._pre.observe(most)
+        self._gmres_failed = False
         return X
 
     def linsolve(self, omega: float, nl: np.ndarray, Dg, rhs: list[np.ndarray]) -> list[np.ndarray]:
@@ -475,12 +480,14 @@ class HarmonicBalance:
         factorization of the reduced system instead of a failed continuation step."""
         self.stats["dense_fallbacks"] += 1
         P = self.nH * 3 * nl.size
-        self._dense_left, self._dense_size = DENSE_AFTER_FALLBACK, P
+        if self._gmres_failed:
+            self._dense_left, self._dense_size = DENSE_AFTER_FALLBACK, P
+        self._gmres_failed = True
         return self._reduced(omega, nl, Dg, dense=True, out=out)[3]
 
     def _after_fallback(self, P: int) -> bool:
-        """True for a system solved directly by LU because GMRES failed on one about as large
-        shortly before (``DENSE_AFTER_FALLBACK``)."""
+        """True for a system solved directly by LU because GMRES failed on two in a row, about
+        as large, shortly before (``DENSE_AFTER_FALLBACK``)."""
         if self._dense_left > 0 and P >= DENSE_FALLBACK_SIZE * self._dense_size:
             self._dense_left -= 1
             self.stats["dense_after_fallback"] += 1
