@@ -19,7 +19,24 @@ harmonics of an element (3 n_H x 3 n_H per element).
   its right-hand side (one block Gauss-Seidel sweep): one real LU and the static receptance
   G_0 on the elements more than the averaged one.
 
-How it was chosen (31 Newton systems of the quick model's top-level baseline sweep, 201
+* ``ElementBlockPreconditioner`` (``preconditioner="element"``): block Jacobi over the
+  elements, each element's own block of J inverted exactly, I + G_ee D_e (3 n_H x 3 n_H, every
+  harmonic coupled, the mean's included); the elastic coupling between elements is dropped. Its
+  set-up is k small inverses, rebuilt at every solve.
+* ``TwoLevelPreconditioner`` (``preconditioner="two-level"``): the averaged one, then the
+  element blocks on the residual it leaves (multiplicative; one more product with J).
+
+Session 7 (issue 16), on Newton systems captured from the default model (H = 3, p = 645-1059),
+GMRES iterations per solve, averaged / mean-coupled / element / two-level: the top-level
+baseline sweep 50-112 / 41-73 / 51-107 / 29-66; the stiff layer joint's backbone (k_n 10 x the
+patch value, 231-289 elements) 287-426 / 226-258 / 107-148 / 70-111. In the friction Jacobian
+minus its harmonic average, D - k_bar, every element counts (relative norm 1.3-1.7, median):
+no small set of elements carries the harmonic coupling, so a low-rank correction of the
+averaged preconditioner is not an option. A stale exact LU of J (7413 unknowns, 4.9 s; float32
+3.1 s) needed 19, 49 and 95 iterations 12, 24 and 36 solves after it was built, at the same
+nonlinear set: the friction Jacobian moves too fast for a factorization to be reused.
+
+How the first two were chosen (31 Newton systems of the quick model's top-level baseline sweep, 201
 nonlinear elements, p = 603, H = 1, GMRES to 1e-8; ``scripts/bench_preconditioner.py`` for whole
 curves):
 
@@ -144,6 +161,79 @@ class MeanCoupledPreconditioner:
         return out.ravel()
 
 
-#: the preconditioners ``HarmonicBalance(preconditioner=...)`` accepts
+class ElementBlockPreconditioner:
+    """The exact inverse of each element's own block of J (block Jacobi over elements): the
+    element's receptance on itself at every harmonic, G_ee,h = R_ee + Psi_e L_h Psi_e^T, times its
+    whole friction Jacobian D_e, all harmonics coupled: (I + G_ee D_e)^-1, 3 n_H x 3 n_H each.
+
+    It keeps what the averaged preconditioner drops (the coupling between harmonics, the mean's
+    included) and drops what it keeps (the elastic coupling between elements). Its set-up is k
+    small inverses, so it is rebuilt at every solve (``fresh``), never stale.
+
+    Args: as :class:`MeanCoupledPreconditioner`.
+    """
+
+    fresh = True
+
+    def __init__(self, R: np.ndarray, Psi: np.ndarray, Ls: list, Dg: np.ndarray) -> None:
+        k = Dg.shape[0]
+        H = len(Ls) - 1
+        nH, p = 2 * H + 1, 3 * k
+        self.nH, self.p, self.k = nH, p, k
+        e = np.arange(k)
+        Ree = R.reshape(k, 3, k, 3)[e, :, e, :]                            # (k, 3, 3)
+        Pe = Psi.reshape(k, 3, -1)                                         # (k, 3, m)
+        G = np.zeros((k, 3, nH, 3, nH))                                    # element layout
+        for h, L in enumerate(Ls):
+            Gh = Ree + (np.einsum("kam,m,kbm->kab", Pe, L, Pe) if L.ndim == 1
+                        else np.einsum("kam,mn,kbn->kab", Pe, L, Pe))
+            if h == 0:
+                G[:, :, 0, :, 0] = Gh.real
+            else:
+                a, b = 2 * h - 1, 2 * h
+                G[:, :, a, :, a], G[:, :, a, :, b] = Gh.real, Gh.imag
+                G[:, :, b, :, a], G[:, :, b, :, b] = -Gh.imag, Gh.real
+        A = G.reshape(k, 3 * nH, 3 * nH) @ Dg
+        A[:, np.arange(3 * nH), np.arange(3 * nH)] += 1.0
+        self.inv = np.linalg.inv(A)
+        # reduced-layout index (h p + 3e + d) of element-layout entry (e, d n_H + h)
+        d, hh = np.divmod(np.arange(3 * nH), nH)
+        self.idx = hh[None, :] * p + 3 * e[:, None] + d[None, :]
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """Approximate J^-1 x for x (n_H p,) in the reduced layout."""
+        out = np.empty_like(x)
+        out[self.idx] = np.einsum("kab,kb->ka", self.inv, x[self.idx])
+        return out
+
+
+class TwoLevelPreconditioner:
+    """The averaged preconditioner (elastic coupling between elements, harmonics averaged), then
+    the element blocks on what is left (harmonic coupling within each element), multiplicatively:
+    z = A r, z += E (r - J z). One more product with J per application.
+
+    Measured on Newton systems captured from the default model (H = 3), GMRES iterations per
+    solve (averaged / element blocks alone / this): the top-level baseline sweep (215-353
+    nonlinear elements) 50-112 / 51-107 / 29-66; the stiff layer joint's backbone (k_n 10 x,
+    231-289 elements) 287-426 / 107-148 / 70-111.
+
+    Args:
+        averaged: a :class:`HarmonicAveragedPreconditioner` (may be reused from earlier solves).
+        element: an :class:`ElementBlockPreconditioner` of this solve's Jacobian.
+        matvec: x -> J x in the reduced layout.
+    """
+
+    def __init__(self, averaged, element, matvec) -> None:
+        self.averaged, self.element, self.matvec = averaged, element, matvec
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        z = self.averaged(x)
+        return z + self.element(x - self.matvec(z))
+
+
+#: the preconditioners ``HarmonicBalance(preconditioner=...)`` accepts ("two-level" is built by
+#: the solver from the averaged one and the element blocks, as it needs the Jacobian's product)
 PRECONDITIONERS = {"averaged": HarmonicAveragedPreconditioner,
-                   "mean-coupled": MeanCoupledPreconditioner}
+                   "mean-coupled": MeanCoupledPreconditioner,
+                   "element": ElementBlockPreconditioner,
+                   "two-level": HarmonicAveragedPreconditioner}

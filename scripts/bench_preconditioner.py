@@ -4,10 +4,11 @@
 Runs chosen curves of a finished run (its fe and contact stages are read, nothing is written)
 with each preconditioner of ``hbm.preconditioner`` in turn, in the same process, and prints a
 markdown table: points, curve time, linear solves, GMRES iterations per solve, preconditioner
-set-ups, and the peak of each run against the harmonic-block one's.
+set-ups, dense LUs (for a determinant's sign, after a GMRES failure, and straight after two
+failures), and the peak of each run against the first preconditioner's.
 
 Usage: OMP_NUM_THREADS=1 python scripts/bench_preconditioner.py RUN_DIR
-       [--curves baseline@L2 v2@L1 ...] [--preconditioners harmonic-block averaged]
+       [--curves baseline@L2 v2@L1 ...] [--preconditioners element averaged two-level]
 
 A curve is ``<configuration>@L<level index>`` of that run's fixed configurations (baseline,
 smooth-ms, v1, v2). The peers run one after the other on one core: compare them in the same run.
@@ -68,8 +69,9 @@ def main(argv=None) -> int:
     print(f"\n### GMRES preconditioners on {out} (H = {inp.settings.harmonics}, "
           f"n_t = {inp.settings.samples}, levels {', '.join(f'{x:.3g}' for x in inp.levels)} N)\n")
     print("| curve | preconditioner | points | curve (s) | linear solves | GMRES iterations / solve "
-          "| set-ups | peak (Hz) | peak (mm) | peak vs first, rel. (Hz / mm) | time ratio |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "| set-ups | dense LUs (signs / GMRES failed / after failures) | peak (Hz) | peak (mm) "
+          "| peak vs first, rel. (Hz / mm) | time ratio |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name in a.curves:
         config, level = name.split("@L")
         first = None
@@ -80,7 +82,8 @@ def main(argv=None) -> int:
             damp = abs(cr.peak_amplitude - first[0].peak_amplitude) / first[0].peak_amplitude
             gm = st["gmres_iterations"] / max(st["linear_solves"], 1)
             print(f"| {name} | {pc} | {cr.n_points} | {dt:.1f} | {st['linear_solves']} | {gm:.1f} | "
-                  f"{st['preconditioners']} | {cr.peak_hz:.6f} | {cr.peak_amplitude:.6f} | "
+                  f"{st['preconditioners']} | {st['sign_factorizations']} / {st['dense_fallbacks']} / "
+                  f"{st['dense_after_fallback']} | {cr.peak_hz:.6f} | {cr.peak_amplitude:.6f} | "
                   f"{dhz:.1e} / {damp:.1e} | {dt / first[1]:.2f} |", flush=True)
     return 0
 
