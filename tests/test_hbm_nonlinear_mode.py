@@ -404,3 +404,27 @@ def test_epmc_newton_stops_on_a_stall_near_the_solution(monkeypatch):
     prob.tol = 1.5 * e.value.residual / STAGNATION_FLOOR
     got = prob.solve(a, *start)
     assert got[3] == e.value.residual and got[4] == n - 1      # the same (last, best) iterate
+
+
+def test_backbone_steps_over_one_amplitude_where_newton_fails(monkeypatch):
+    """Where Newton fails at one output amplitude (and on the halved steps towards it), the
+    continuation takes one whole step from the last point to the next output amplitude: that
+    amplitude is missing, named in stop_reason, and every other point is the full backbone's."""
+    from hbm.errors import ConvergenceError
+    hb = jenkins_1dof(1, 256)
+    full = hb.nonlinear_mode(0, (0.05, 20.0), dof=0, n_points=12)
+    bad = full.modal_amplitude[6]
+    lo = full.modal_amplitude[5] * (bad / full.modal_amplitude[5]) ** 0.5
+    solve = NonlinearModeProblem.solve
+
+    def kink(self, a, *args, **kw):
+        if lo < a <= bad:
+            raise ConvergenceError("test: a kink", 3e-7)
+        return solve(self, a, *args, **kw)
+    monkeypatch.setattr(NonlinearModeProblem, "solve", kink)
+    bb = hb.nonlinear_mode(0, (0.05, 20.0), dof=0, n_points=12)
+    assert bb.complete and "skipped modal amplitude" in bb.stop_reason and "3e-07" in bb.stop_reason
+    keep = np.arange(full.modal_amplitude.size) != 6
+    assert np.array_equal(bb.modal_amplitude, full.modal_amplitude[keep])
+    assert np.allclose(bb.omega, full.omega[keep], rtol=1e-9)
+    assert np.allclose(bb.xi, full.xi[keep], rtol=1e-7)
