@@ -10,7 +10,8 @@ of the kept modes, L_h their modal factors at harmonic h (complex; L_0 real and 
 the frequency) and D the friction Jacobian, block-diagonal over elements but coupling all
 harmonics of an element (3 n_H x 3 n_H per element).
 
-* ``HarmonicAveragedPreconditioner`` (the default, as before issue 16): each
+* ``HarmonicAveragedPreconditioner`` (``preconditioner="averaged"``, the default until issue 16's
+  session 7): each
   element's D replaced by its mean 3x3 diagonal block over the dynamic harmonics, k_bar, which
   decouples the harmonics; one real LU of I + R k_bar and a rank-m Woodbury correction per
   harmonic.
@@ -18,13 +19,22 @@ harmonics of an element (3 n_H x 3 n_H per element).
   harmonic solved exactly, J_00 = I + G_0 D_00, with the dynamic harmonics' force D_0h x_h on
   its right-hand side (one block Gauss-Seidel sweep): one real LU and the static receptance
   G_0 on the elements more than the averaged one.
-
-* ``ElementBlockPreconditioner`` (``preconditioner="element"``): block Jacobi over the
+* ``ElementBlockPreconditioner`` (``preconditioner="element"``, the default): block Jacobi over the
   elements, each element's own block of J inverted exactly, I + G_ee D_e (3 n_H x 3 n_H, every
   harmonic coupled, the mean's included); the elastic coupling between elements is dropped. Its
   set-up is k small inverses, rebuilt at every solve.
 * ``TwoLevelPreconditioner`` (``preconditioner="two-level"``): the averaged one, then the
   element blocks on the residual it leaves (multiplicative; one more product with J).
+
+Whole curves of the default model (``scripts/bench_preconditioner.py``, one process per
+preconditioner, two at a time on the two cores), time (GMRES iterations per solve): baseline at
+the top level, element 222.7 s (81.3), two-level 299.4 s (56.2), averaged 386 s (92.0); v2 at
+the top level 71.7 (40.9) / 97.0 (27.9); v2 at the middle level 30.9 (22.3) / 38.4 (15.5);
+smooth-ms at the middle level 26.8 (36.4) / 36.6 (24.2); the same points and peaks (to the
+digits of the table). The element blocks' application is a batch of small products and they
+are never stale; the two-level one saves iterations but pays a product with J and an averaged
+application in each. On the stiff layer joint's backbone the element blocks took 146-286 s
+where the averaged one had taken 516 s (and stopped at a kink, see ``nonlinear_mode``).
 
 Session 7 (issue 16), on Newton systems captured from the default model (H = 3, p = 645-1059),
 GMRES iterations per solve, averaged / mean-coupled / element / two-level: the top-level
