@@ -383,9 +383,7 @@ class HarmonicBalance:
         """
         nH, p = self.nH, cn.size
         k, P = p // 3, nH * p
-        J = np.zeros((P, P)) if out is None else out
-        if out is not None:
-            J[...] = 0.0
+        J = np.empty((P, P)) if out is None else out      # every block is written once below
         D5 = Dg.reshape(k, 3, nH, 3, nH)
         for h in range(self.H + 1):
             Gh = self.G.matrix(h, omega, cn, cn)
@@ -401,7 +399,7 @@ class HarmonicBalance:
                                           D5[:, :, c, :, :].reshape(k, 3, 3 * nH))
                 acc = acc.reshape(k, p, 3, nH)
                 for col in range(nH):     # column col p + 3e + d of row block r
-                    J[r * p:(r + 1) * p, col * p:(col + 1) * p] += (
+                    J[r * p:(r + 1) * p, col * p:(col + 1) * p] = (
                         acc[:, :, :, col].transpose(1, 0, 2).reshape(p, p))
         J[np.diag_indices(P)] += 1.0
         return J
