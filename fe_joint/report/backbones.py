@@ -139,6 +139,7 @@ def _panels(data: ReportData):
 
 def _draw(data: ReportData, path: Path, quantity: str) -> Path | None:
     """One backbone figure: ``quantity`` "frequency" (Hz) or "zeta" against the amplitude."""
+    from ..study.configurations import LIKE_FOR_LIKE
     from .figures import COLORS, _plt, _save
     if not data.backbones:
         return None
@@ -153,9 +154,12 @@ def _draw(data: ReportData, path: Path, quantity: str) -> Path | None:
             if key.config == "v3" and ax is axes[1]:
                 color = cmap(0.85 * rqs.index(key.rq_um) / max(len(rqs) - 1, 1))
             else:
-                color = COLORS.get(key.config, "k")
+                # a like-for-like variant (v1-v2set, v2-keep) dashed in its parent's colour: all
+                # three were black before, one legend colour for baseline and both variants
+                color = COLORS.get(LIKE_FOR_LIKE.get(key.config, key.config), "k")
             y = br.frequency_hz if quantity == "frequency" else br.zeta
-            ax.semilogx(1e3 * br.displacement_amplitude, y, "-", color=color, label=label(key))
+            ax.semilogx(1e3 * br.displacement_amplitude, y,
+                        "--" if key.config in LIKE_FOR_LIKE else "-", color=color, label=label(key))
             for i, cr in sorted(data.backbone_curves(key).items()):
                 m = markers[i % len(markers)]
                 yf = cr.peak_hz if quantity == "frequency" else zeta_at(br, cr.peak_amplitude)
