@@ -258,6 +258,7 @@ class HarmonicBalance:
         self.G = Receptance(s, self.B, self.k0)
         self.ne, self.nc = c.ne, 3 * c.ne
         self._pre = None          # cached preconditioner (GMRES path)
+        self._rows = None         # (G, nonlinear set, R and Psi on its coordinates)
         self._dense_left, self._dense_size = 0, 0     # dense solves owed to the last fallbacks
         self._gmres_failed = False                    # the last GMRES solve failed
         self.krylov_tol = float(krylov_tol)
@@ -473,9 +474,9 @@ class HarmonicBalance:
         return [r - self._expand(omega, nl, cn, idx, Dg, X[:, i]) for i, r in enumerate(rhs)]
 
     def _dense_fallback(self, omega, nl, Dg, out=None):
-        """The reduced Jacobian formed for an LU solve where GMRES stalled: the harmonic-averaged
-        preconditioner can be poor where a few elements' Jacobians are stiff (e.g. slip starting
-        right at a closing, where the slip law is singular), and the exact solve costs a
+        """The reduced Jacobian formed for an LU solve where GMRES stalled: a preconditioner can
+        be poor where a few elements' Jacobians are stiff (e.g. slip starting right at a
+        closing, where the slip law is singular, or a stiff contact), and the exact solve costs a
         factorization of the reduced system instead of a failed continuation step."""
         self.stats["dense_fallbacks"] += 1
         P = self.nH * 3 * nl.size
@@ -562,17 +563,13 @@ class HarmonicBalance:
         P = nH * p
         Ls = [self.G.modal(h, omega) for h in range(self.H + 1)]
         kind = PRECONDITIONERS[self.preconditioner]
+        R, Psi = self._contact_rows(nl, cn)
         pre = self._pre
         if getattr(kind, "fresh", False):
-            R, Psi = self.G.R[np.ix_(cn, cn)], self.G.Psi[cn]
             pre = None
         elif pre is None or not pre.usable(self.G, nl, omega):
-            R = self.G.R[np.ix_(cn, cn)]
-            Psi = self.G.Psi[cn]
             pre = self._pre = _PreconditionerCache(self.G, nl, omega, R, Psi, kind(R, Psi, Ls, Dg))
             self.stats["preconditioners"] += 1
-        if pre is not None:
-            R, Psi = pre.R, pre.Psi
 
         def matvec(x):
             ge = np.einsum("kxy,ky->kx", Dg, x[idx])
@@ -587,6 +584,15 @@ class HarmonicBalance:
             return matvec, TwoLevelPreconditioner(pre.apply, ElementBlockPreconditioner(R, Psi, Ls, Dg),
                                                   matvec)
         return matvec, pre.apply
+
+    def _contact_rows(self, nl: np.ndarray, cn: np.ndarray):
+        """R and Psi restricted to the nonlinear elements' coordinates cn, kept while the
+        receptance and the nonlinear set stay the same (the set changes at a few points per
+        curve, the solves happen at every Newton step)."""
+        rows = self._rows
+        if rows is None or rows[0] is not self.G or not np.array_equal(rows[1], nl):
+            rows = self._rows = (self.G, nl.copy(), self.G.R[np.ix_(cn, cn)], self.G.Psi[cn])
+        return rows[2], rows[3]
 
     # ------------------------------------------------------------------ Newton
     def _scale(self, U, Ul):

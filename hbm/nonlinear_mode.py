@@ -566,9 +566,8 @@ def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40
         if not stop:
             rows.append((at, U, w, xi, g, res, it))
             i += 1
-    if skipped and not stop:
-        stop = "skipped modal amplitude " + ", ".join(
-            f"{a:.6g} (residual reached: {r:.3g})" for a, r in skipped)
+    reason = stop or ("skipped modal amplitude " + ", ".join(
+        f"{a:.6g} (residual reached: {r:.3g})" for a, r in skipped) if skipped else "")
     pts = [prob.point(a, U, w, xi, g, int(dof)) for a, U, w, xi, g, _, _ in rows]
     col = {k: np.array([p[k] for p in pts]) for k in pts[0]}
     om = np.array([r[2] for r in rows])
@@ -585,7 +584,6 @@ def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40
                     iterations=np.array([r[6] for r in rows]),
                     linear_omega=float(np.sqrt(prob.lam_j)),
                     linear_zeta=prob.c_j / (2 * np.sqrt(prob.lam_j)), onset_amplitude=onset,
-                    wall_time=time.perf_counter() - t0,
-                    complete=not stop or stop.startswith("skipped"), stop_reason=stop,
+                    wall_time=time.perf_counter() - t0, complete=not stop, stop_reason=reason,
                     displacement=col["displacement"],
                     background=prob.background(int(dof)))
