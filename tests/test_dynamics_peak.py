@@ -2,6 +2,8 @@
 fixed points."""
 from __future__ import annotations
 
+import dataclasses
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -205,23 +207,42 @@ def test_a_stalled_tight_solve_gives_its_best_iterate_without_looser_solves(monk
 
 
 def test_speed_tables_measure_the_frf_peak() -> None:
-    """The harmonics/samples speed-against-error rows are the FRF peak (a short sweep through it,
-    speed_error.PEAK_BAND), not a cold-start solve at the peak frequency (which landed on the lower
-    branch of the resonator's fold): at the study's own H and n_t the row equals the full sweep's
-    polished peak (measured 6e-9 in f, 2e-8 in amplitude); the last row is the reference (0 error)."""
-    from fe_joint.study.speed_error import hbm_knobs
+    """The harmonics/samples speed-against-error rows are the FRF peak (a local peak search from
+    the reference peak, which a short sweep through it finds, speed_error.PEAK_BAND), not a
+    cold-start solve at the peak frequency (which landed on the lower branch of the resonator's
+    fold): at the study's own H and n_t the row equals the full sweep's polished peak; each row
+    equals a full sweep's peak at its own H and n_t; the last row is the reference (0 error)."""
+    from fe_joint.study import speed_error as se
     rm, joint, level = _two_grounded_masses(), _joint(2e4), 5.0
     cr, _ = _sweep(rm, joint, level)
-    t = hbm_knobs(rm, joint, level, SETTINGS, cr.peak_hz, harmonics=(1, 3), samples=(16, 32),
-                  h_fixed=1)
-    rows = t["AFT samples (baseline, middle level, FRF peak by a sweep through it)"]
+    t = se.hbm_knobs(rm, joint, level, SETTINGS, cr.peak_hz, harmonics=(1, 3), samples=(16, 32),
+                     h_fixed=1)
+    rows = t[se.SAMPLES_TABLE]
     same = rows[-1]                                   # H = 1, 32 samples: the sweep's settings
     assert (same["harmonics"], same["samples"]) == (1, 32)
     assert abs(same["peak [Hz]"] / cr.peak_hz - 1) <= 1e-7
     assert abs(same["amplitude [µm]"] / (1e3 * cr.peak_amplitude) - 1) <= 1e-6
     assert same["f error vs finest [%]"] == 0.0 and rows[0]["amplitude error vs finest [%]"] > 0
-    hr = t["harmonics (baseline, middle level, FRF peak by a sweep through it)"]
-    assert [r["harmonics"] for r in hr] == [1, 3] and all(r["points"] > 10 for r in hr)
+    hr = t[se.HARMONICS_TABLE]
+    assert [r["harmonics"] for r in hr] == [1, 3] and all(3 <= r["points"] < 80 for r in hr)
+    # H = 3 with 256 samples, started from the H = 1 peak (padded with zeros): a sweep's peak
+    f3 = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency
+    sweep3, _ = frf_with_peak(rm, joint, level, f3, SweepSettings(3, 256, (0.8, 1.1), 400, 0.5))
+    assert abs(hr[1]["peak [Hz]"] / sweep3.peak_hz - 1) <= 1e-7
+    assert abs(hr[1]["amplitude [µm]"] / (1e3 * sweep3.peak_amplitude) - 1) <= 1e-6
+    assert abs(hr[1]["peak [Hz]"] / same["peak [Hz]"] - 1) > 1e-6       # H matters here
+
+
+def test_speed_row_without_a_reference_says_so() -> None:
+    """A row whose reference sweep failed is 'not found', with no search (and no sweep)."""
+    from fe_joint.study import speed_error as se
+    rm, joint = _two_grounded_masses(), _joint(2e4)
+    row = se.hbm_row(rm, joint, 5.0, SETTINGS, {"peak [Hz]": float("nan"), "guess": None}, 3, 64)
+    assert row["points"] == 0 and np.isnan(row["peak [Hz]"]) and "no reference" in row["note"]
+    g = np.arange(2 * 3 * 3.0).reshape(2, 3, 3)
+    assert np.array_equal(se.with_harmonics(g, 2)[..., :3], g)
+    assert not se.with_harmonics(g, 2)[..., 3:].any()
+    assert np.array_equal(se.with_harmonics(se.with_harmonics(g, 2), 1), g)
 
 
 def test_element_count_rows_are_the_models_own_peaks() -> None:
@@ -267,24 +288,38 @@ def test_speed_rows_as_queue_jobs_give_the_sequential_tables(tmp_path) -> None:
            se.MESH_TABLE: se.mesh_rows(models, level, SETTINGS, ref.peak_hz)}
     jobs = se.speed_jobs([], knobs, len(models), (1, 32))
     assert jobs[0] == se.SpeedJob("harmonics", 1, harmonics=3, samples=256)   # the costliest first
-    # one sweep per (model, H, n_t): the case mesh's row is the samples row of the study's knobs
-    sweeps = [(j.model if j.table == "mesh" else -1, j.harmonics or 1, j.samples or 32)
-              for j in jobs if j.table != "bem" and not j.peak_of]
-    assert len(sweeps) == len(set(sweeps)) == 5
-    assert [j.peak_of for j in jobs if j.table == "mesh"] == ["", "samples-1"]
+    # one search per (model, H, n_t): the case mesh's row is the reference's sweep
+    searches = [(j.model if j.table == "mesh" else -1, j.harmonics or 1, j.samples or 32)
+                for j in jobs if j.table not in ("bem", "reference") and not j.peak_of]
+    assert len(searches) == len(set(searches)) == 5
+    assert [j.peak_of for j in jobs if j.table == "mesh"] == ["", se.REFERENCE]
+    assert {j.name for j in jobs if j.needs_reference} == {"samples-0", "samples-1", "harmonics-0",
+                                                           "harmonics-1"}
     f_case = stuck_modes(rm.K, rm.M, rm.pair_dofs, case_joint).frequency
+    reference = {}
 
     def run(job):          # as the speed stage's
         if job.peak_of:
             return se.own_fields(job, models)
         if job.table == "mesh":
             return se.mesh_row(models[job.model], f_case, level, SETTINGS, ref.peak_hz)
-        return se.hbm_row(rm, case_joint, level, SETTINGS, ref.peak_hz, job.harmonics, job.samples)
+        if job.table == "reference":
+            return se.reference_row(rm, case_joint, level, SETTINGS, ref.peak_hz)
+        return se.hbm_row(rm, case_joint, level, SETTINGS, reference, job.harmonics, job.samples)
 
     stale = se.SpeedJob("samples", 0, harmonics=1, samples=16)
     se.write_row(tmp_path, stale, {"peak [Hz]": -1.0}, key="another case")
     assert se.read_rows(tmp_path, jobs, "k") == {}
-    run_jobs(run, lambda f, j, r: se.write_row(f, j, r, "k"), jobs[::-1], tmp_path, skip_done=False)
+    older = tmp_path / "samples-1.json"       # a row of the previous version (a sweep)
+    j1 = next(j for j in jobs if j.name == "samples-1")
+    older.write_text(json.dumps({"key": "k", "job": dataclasses.asdict(j1), "row": {}}))
+    assert se.read_rows(tmp_path, jobs, "k") == {}
+    older.unlink()
+    write = (lambda f, j, r: se.write_row(f, j, r, "k"))
+    run_jobs(run, write, [j for j in jobs[::-1] if not j.needs_reference], tmp_path, skip_done=False)
+    reference.update(se.read_reference(tmp_path, se.read_rows(tmp_path, jobs, "k")))
+    assert reference["guess"].shape == (1, 3, 3)
+    run_jobs(run, write, [j for j in jobs[::-1] if j.needs_reference], tmp_path, skip_done=False)
     got = se.assemble_tables(jobs, se.read_rows(tmp_path, jobs, "k"), 3)
     assert list(got) == [se.HARMONICS_TABLE, se.SAMPLES_TABLE, se.MESH_TABLE]
     for title, rows in seq.items():

@@ -349,6 +349,7 @@ def _speed_tables(ctx: StageContext) -> dict:
             models.append((size, rm_s, sec, joint_baseline(su, c.contact.k_ref)))
     f_case = (stuck_modes(rm.K, rm.M, rm.pair_dofs, models[-1][3]).frequency if models else 0.0)
     jobs = se.speed_jobs(grids, knobs, len(models), (settings.harmonics, settings.samples))
+    ref: dict = {}     # the reference peak, read from disk before the second round
 
     def run(job: se.SpeedJob) -> dict:
         if job.peak_of:
@@ -357,16 +358,24 @@ def _speed_tables(ctx: StageContext) -> dict:
             return se.bem_row(rm, c, job.grid)
         if job.table == "mesh":
             return se.mesh_row(models[job.model], f_case, cr.level, settings, cr.peak_hz)
-        return se.hbm_row(rm, models[-1][3], cr.level, settings, cr.peak_hz, job.harmonics, job.samples)
+        if job.table == "reference":
+            return se.reference_row(rm, models[-1][3], cr.level, settings, cr.peak_hz)
+        return se.hbm_row(rm, models[-1][3], cr.level, settings, ref, job.harmonics, job.samples)
 
     folder, stage_key = ctx.path("speed", "rows"), ctx.keys.get("speed", "")
     if ctx.rank == 0:       # rows of another key (an earlier case) are not this stage's
         keep = se.read_rows(folder, jobs, stage_key)
+        if se.REFERENCE in keep and se.read_reference(folder, keep)["guess"] is None \
+                and "note" not in keep[se.REFERENCE]:
+            keep.pop(se.REFERENCE)          # its guess is missing: run it again
         for f in folder.glob("*.json") if folder.exists() else []:
             if f.stem not in keep:
                 f.unlink()
-    run_jobs(run, lambda fold, job, row: se.write_row(fold, job, row, stage_key), jobs, folder,
-             comm=ctx.comm)
+    write = (lambda fold, job, row: se.write_row(fold, job, row, stage_key))
+    # two rounds: the harmonics and samples rows start from the reference's peak
+    run_jobs(run, write, [j for j in jobs if not j.needs_reference], folder, comm=ctx.comm)
+    ref.update(se.read_reference(folder, se.read_rows(folder, jobs, stage_key)))
+    run_jobs(run, write, [j for j in jobs if j.needs_reference], folder, comm=ctx.comm)
     if ctx.rank != 0:
         return {}
     out = se.assemble_tables(jobs, se.read_rows(folder, jobs, stage_key), hs[-1])

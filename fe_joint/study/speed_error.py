@@ -3,9 +3,10 @@
 Each table varies one knob with the others at the case's values and compares against the finest
 setting computed in the same run: the global BEM grid (real contact area), the number of
 harmonics and the AFT samples (the baseline's FRF peak at the middle level: frequency and
-first-harmonic amplitude, each found by a short sweep through the peak, :data:`PEAK_BAND`; a
-cold-start solve at the peak frequency landed on the lower branch of the fold, 158.5 vs 492 µm on
-the default case, and measured the wrong solution's convergence), and the element count: the
+first-harmonic amplitude, each found by a local peak search warm-started from the peak at the
+case's own H and n_t, which a short sweep through it finds, :data:`PEAK_BAND`; a cold-start solve
+at the peak frequency landed on the lower branch of the fold, 158.5 vs 492 µm on the default
+case, and measured the wrong solution's convergence), and the element count: the
 lap mesh size sets how many friction elements the interface has (:func:`mesh_rows`, on reduced
 models the ``speed`` stage builds at coarser lap meshes; the FE side of mesh convergence is in
 ``scripts/bench_fe.py`` and ``scripts/bench_geometry.py``).
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import contact as ms
-from .frf import SweepSettings, frf
+from .frf import SweepSettings, frf, frf_with_peak, peak_near
 
 
 def bem_row(rm, case, n: int) -> dict:
@@ -48,33 +49,92 @@ def bem_grid(rm, case, grids=(64, 128, 256, 512)) -> list[dict]:
     return bem_errors([bem_row(rm, case, n) for n in grids])
 
 
-#: the band of the speed-against-error sweeps, as fractions of the study curve's peak: the sweep
-#: starts below the fold of a softening peak (where the response is single-valued) and passes
-#: through the peak, so each row measures the FRF peak itself, not a cold start's lower branch
+#: the band of the speed stage's sweeps (the reference peak and the element-count rows), as
+#: fractions of the study curve's peak: the sweep starts below the fold of a softening peak (where
+#: the response is single-valued) and passes through the peak, so it measures the FRF peak itself,
+#: not a cold start's lower branch
 PEAK_BAND = (0.99, 1.005)
+#: where the harmonics and samples rows' local peak searches start, relative to the reference
+#: peak: just above it, where the branch is single-valued even when it folds below the peak (on
+#: the default case H = 1 moves the peak by +0.2 %, the samples by less than 0.02 %)
+LOCAL_START = 2e-3
 
 
-def hbm_row(rm, joint, level: float, settings: SweepSettings, f_peak_hz: float, H: int,
-            nt: int) -> dict:
-    """The FRF peak (frequency, amplitude) and its sweep's time with H harmonics and nt AFT
-    samples, by a sweep through :data:`PEAK_BAND` × ``f_peak_hz``; a sweep that fails gives a
-    row that says so (the run's results are not affected)."""
+def reference_row(rm, joint, level: float, settings: SweepSettings, f_peak_hz: float) -> dict:
+    """The reference of the harmonics and samples rows: the FRF peak at the case's own H and n_t,
+    by a sweep through :data:`PEAK_BAND` × ``f_peak_hz``.
+
+    Returns:
+        the row's fields (H, samples, peak [Hz], amplitude [µm], time [s], points; "note" when the
+        sweep fails) and "guess", the contact harmonics at the peak, (ne, 3, 2H + 1) over all
+        pairs (absent when the sweep fails): the rows' warm start (:func:`hbm_row`).
+    """
     from hbm import ConvergenceError
-    st = dataclasses.replace(settings, harmonics=H, samples=nt, band=PEAK_BAND)
-    out = {"harmonics": H, "samples": nt}
+    st = dataclasses.replace(settings, band=PEAK_BAND)
+    out = {"harmonics": settings.harmonics, "samples": settings.samples}
     t0 = time.perf_counter()
     try:
-        cr = frf(rm, joint, level, f_peak_hz, st)
+        cr, guess = frf_with_peak(rm, joint, level, f_peak_hz, st)
     except ConvergenceError as e:
         return {**out, "peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
                 "time [s]": time.perf_counter() - t0, "points": 0, "note": f"not found ({e})"}
+    return {**out, "peak [Hz]": cr.peak_hz, "amplitude [µm]": 1e3 * cr.peak_amplitude,
+            "time [s]": time.perf_counter() - t0, "points": cr.n_points, "guess": guess}
+
+
+def with_harmonics(contact: np.ndarray, H: int) -> np.ndarray:
+    """Contact harmonics (ne, 3, 2H' + 1) cut or padded with zeros to H harmonics."""
+    out = np.zeros(contact.shape[:2] + (2 * H + 1,))
+    n = min(out.shape[2], contact.shape[2])
+    out[..., :n] = contact[..., :n]
+    return out
+
+
+def hbm_row(rm, joint, level: float, settings: SweepSettings, reference: dict, H: int,
+            nt: int) -> dict:
+    """The FRF peak (frequency, amplitude) with H harmonics and nt AFT samples, and the time of
+    its search: a local peak search (:func:`~fe_joint.study.frf.peak_near`) warm-started from
+    the reference peak (:func:`reference_row`, the case's H and n_t).
+
+    A sweep per row through the peak cost 20-490 s a row on the default model (the n_t = 32
+    row's sweep failed with the fast tolerances after 3800 solves before the strict one found
+    it); the local search, 5-23 s, finds the same peak (n_t = 64: equal to 1e-10 to a sweep's).
+    A search that fails gives a row that says so; no sweep follows (the run's results are not
+    affected).
+
+    Args:
+        rm, joint, level: the model, the configuration and the level (N).
+        settings: the study's sweep settings (H and n_t replaced).
+        reference: :func:`reference_row`'s fields (its "peak [Hz]" and "guess").
+        H, nt: the row's harmonics and samples.
+    Returns:
+        H, samples, peak [Hz], amplitude [µm], time [s], points (of the local branch), and a
+        "note" when no peak is found.
+    """
+    from hbm import ConvergenceError
+    out = {"harmonics": H, "samples": nt}
+    t0 = time.perf_counter()
+    if reference.get("guess") is None:
+        return {**out, "peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
+                "time [s]": 0.0, "points": 0, "note": "not found (no reference peak)"}
+    st = dataclasses.replace(settings, harmonics=H, samples=nt)
+    try:
+        cr, _ = peak_near(rm, joint, level, reference["peak [Hz]"] * (1 + LOCAL_START),
+                          with_harmonics(np.asarray(reference["guess"]), H), st)
+    except ConvergenceError as e:
+        why = " ".join(str(e).split())
+        return {**out, "peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
+                "time [s]": time.perf_counter() - t0, "points": 0,
+                "note": f"not found by the local search from the reference peak ({why})"}
     return {**out, "peak [Hz]": cr.peak_hz, "amplitude [µm]": 1e3 * cr.peak_amplitude,
             "time [s]": time.perf_counter() - t0, "points": cr.n_points}
 
 
 #: titles of the HBM tables (the report reads them)
-HARMONICS_TABLE = "harmonics (baseline, middle level, FRF peak by a sweep through it)"
-SAMPLES_TABLE = "AFT samples (baseline, middle level, FRF peak by a sweep through it)"
+HARMONICS_TABLE = ("harmonics (baseline, middle level, FRF peak by a local search from the "
+                   "case settings' peak)")
+SAMPLES_TABLE = ("AFT samples (baseline, middle level, FRF peak by a local search from the case "
+                 "settings' peak)")
 MESH_TABLE = ("interface elements (lap mesh size; baseline, middle level, FRF peak by a sweep "
               "through it)")
 
@@ -89,21 +149,23 @@ def knob_grid(harmonics=(1, 3, 5, 7), samples=(16, 32, 64, 128, 256),
 
 def hbm_knobs(rm, joint, level: float, settings: SweepSettings, f_peak_hz: float,
               harmonics=(1, 3, 5, 7), samples=(16, 32, 64, 128, 256), h_fixed: int = 3) -> dict:
-    """The FRF peak (frequency, amplitude) and its sweep's time vs H and vs AFT samples.
+    """The FRF peak (frequency, amplitude) and its search's time vs H and vs AFT samples.
 
     Args:
         rm: ReducedModel; joint: the configuration; level: N.
-        settings: the study's sweep settings (μ, max_points; H, samples and band are varied).
+        settings: the study's sweep settings (μ, max_points; its H and samples are the
+            reference's, :func:`reference_row`).
         f_peak_hz: the study curve's peak at that level, Hz (centre of :data:`PEAK_BAND`).
         harmonics, samples: the values tried; h_fixed: H of the samples table.
     Returns:
         {table title: rows}, each row with H, samples, peak [Hz], amplitude [µm], time [s],
         points, and its errors against the finest row.
     """
+    ref = reference_row(rm, joint, level, settings, f_peak_hz)
     hk, sk = knob_grid(harmonics, samples, h_fixed)
-    hr = _errors([hbm_row(rm, joint, level, settings, f_peak_hz, H, nt) for H, nt in hk],
+    hr = _errors([hbm_row(rm, joint, level, settings, ref, H, nt) for H, nt in hk],
                  f"H={harmonics[-1]}")
-    sr = _errors([hbm_row(rm, joint, level, settings, f_peak_hz, H, nt) for H, nt in sk], "finest")
+    sr = _errors([hbm_row(rm, joint, level, settings, ref, H, nt) for H, nt in sk], "finest")
     return {HARMONICS_TABLE: hr, SAMPLES_TABLE: sr}
 
 
@@ -202,15 +264,16 @@ class SpeedJob:
     """One row of a speed-against-error table, a job of the MPI queue (``study.queue``).
 
     Attributes:
-        table: "bem", "harmonics", "samples" or "mesh".
+        table: "bem", "harmonics", "samples", "mesh", or "reference" (the peak at the case's H
+            and n_t that the harmonics and samples rows start from; not a table of its own).
         index: the row's place in its table.
         grid: BEM grid n (table "bem").
-        harmonics, samples: H and n_t (tables "harmonics" and "samples").
+        harmonics, samples: H and n_t (tables "harmonics", "samples" and "reference").
         model: index into the stage's reduced models, the case's own last (table "mesh").
-        peak_of: name of the job whose sweep this row's peak is (the same sweep: the harmonics
-            row at the samples table's H, and the case mesh's row at the study's H and n_t);
-            such a job computes only its own fields (:func:`own_fields`), "" for a row with
-            its own sweep.
+        peak_of: name of the job whose peak this row's is (the same computation: the harmonics
+            row at the samples table's H, and the case mesh's row, whose sweep is the
+            reference's); such a job computes only its own fields (:func:`own_fields`), "" for
+            a row with its own search.
     """
     table: str
     index: int
@@ -224,40 +287,59 @@ class SpeedJob:
     def name(self) -> str:
         return f"{self.table}-{self.index}"
 
+    @property
+    def needs_reference(self) -> bool:
+        """Whether the job starts from the reference peak (it runs after the reference job)."""
+        return self.table in ("harmonics", "samples") and not self.peak_of
+
+
+#: the name of the reference job (:func:`speed_jobs`)
+REFERENCE = "reference-0"
+#: bump when how a row is computed changes: rows on disk of another version are computed again
+#: (2: the harmonics and samples rows are local searches from the reference peak, not sweeps)
+ROWS_VERSION = 2
+
 
 def speed_jobs(grids, knobs: tuple[list, list] | None, n_models: int,
                study_knobs: tuple[int, int] = (3, 128)) -> list[SpeedJob]:
     """Every row of the stage as a job, the costly ones first (the queue deals them in order).
 
+    The harmonics and samples rows need the reference job's peak (:attr:`SpeedJob.needs_reference`):
+    the stage runs them in a second round.
+
     Args:
         grids: BEM grid sizes; knobs: :func:`knob_grid`'s (H, n_t) rows, None without the HBM
             tables; n_models: reduced models of the element-count table (0: no table), the
-            case's own last; study_knobs: the study's (H, n_t), those of the element-count rows.
+            case's own last; study_knobs: the study's (H, n_t), those of the element-count rows
+            and of the reference.
     """
     jobs = [SpeedJob("bem", i, grid=n) for i, n in enumerate(grids)]
-    # a row whose sweep is another row's (same model, H and n_t) takes that row's peak: the
-    # default case's harmonics row H = 3, n_t = 256 is the samples row n_t = 256, and the case
-    # mesh's row the samples row of the study's n_t (two sweeps of 38-46 s on the default model)
-    sweeps = {}
-    if knobs is not None:
-        jobs += [SpeedJob("samples", i, harmonics=H, samples=nt) for i, (H, nt) in enumerate(knobs[1])]
-        sweeps = {(j.harmonics, j.samples): j.name for j in jobs if j.table == "samples"}
-        jobs += [SpeedJob("harmonics", i, harmonics=H, samples=nt, peak_of=sweeps.get((H, nt), ""))
-                 for i, (H, nt) in enumerate(knobs[0])]
-    jobs += [SpeedJob("mesh", i, model=i,
-                      peak_of=sweeps.get(study_knobs, "") if i == n_models - 1 else "")
-             for i in range(n_models)]
-    # a sweep's cost grows like (2H + 1)·n_t (the march) and the element count (a coarser mesh
-    # has fewer elements); the BEM rows (seconds) and the rows without a sweep go last
     H, nt = study_knobs
+    if knobs is not None:
+        jobs.append(SpeedJob("reference", 0, harmonics=H, samples=nt))
+        # a row whose peak another row computes takes that row's: the default case's harmonics
+        # row H = 3, n_t = 256 is the samples row n_t = 256
+        jobs += [SpeedJob("samples", i, harmonics=h, samples=n) for i, (h, n) in enumerate(knobs[1])]
+        same = {(j.harmonics, j.samples): j.name for j in jobs if j.table == "samples"}
+        jobs += [SpeedJob("harmonics", i, harmonics=h, samples=n, peak_of=same.get((h, n), ""))
+                 for i, (h, n) in enumerate(knobs[0])]
+    # the case mesh's row is the reference's sweep (same model, H, n_t and band)
+    jobs += [SpeedJob("mesh", i, model=i,
+                      peak_of=REFERENCE if knobs is not None and i == n_models - 1 else "")
+             for i in range(n_models)]
 
+    # a search's cost grows like (2H + 1)·n_t (the march) and the element count (a coarser mesh
+    # has fewer elements); the sweeps (reference, mesh) cost several local searches; the BEM
+    # rows (seconds) and the rows without a search go last
     def cost(j: SpeedJob) -> float:
         if j.peak_of:
             return 0.0
         if j.table == "bem":
             return j.grid ** 2 / 1e6
         if j.table == "mesh":
-            return (2 * H + 1) * nt * (1 + j.model) / max(n_models, 1)
+            return 3 * (2 * H + 1) * nt * (1 + j.model) / max(n_models, 1)
+        if j.table == "reference":
+            return 3 * (2 * H + 1) * nt
         return (2 * j.harmonics + 1) * j.samples
     return sorted(jobs, key=lambda j: -cost(j))
 
@@ -305,21 +387,42 @@ def _peak_fields(source: dict, table: str) -> dict:
 
 
 def write_row(folder: Path, job: SpeedJob, row: dict, key: str) -> None:
-    """A finished row (rank 0), with the stage key it was computed under."""
+    """A finished row (rank 0), with the stage key it was computed under; the reference's
+    contact harmonics ("guess") in ``reference.npy`` beside it, written first (a row on disk
+    means its guess is too)."""
     folder.mkdir(parents=True, exist_ok=True)
+    row = dict(row)
+    guess = row.pop("guess", None)
+    if guess is not None:
+        with open(folder / "reference.npy.tmp", "wb") as f:
+            np.save(f, np.asarray(guess, float))
+        (folder / "reference.npy.tmp").replace(folder / "reference.npy")
     tmp = folder / f"{job.name}.json.tmp"
-    tmp.write_text(json.dumps({"key": key, "job": dataclasses.asdict(job), "row": row}, default=float))
+    tmp.write_text(json.dumps({"key": key, "version": ROWS_VERSION, "job": dataclasses.asdict(job),
+                               "row": row}, default=float))
     tmp.replace(folder / f"{job.name}.json")
 
 
+def read_reference(folder: Path, rows: dict[str, dict]) -> dict:
+    """The reference row with its "guess" (None when its sweep failed or the file is missing)."""
+    ref = dict(rows.get(REFERENCE, {}))
+    try:
+        ref["guess"] = np.load(folder / "reference.npy") if "note" not in ref else None
+    except (OSError, ValueError):
+        ref["guess"] = None
+    return ref
+
+
 def read_rows(folder: Path, jobs: list[SpeedJob], key: str) -> dict[str, dict]:
-    """The rows on disk computed for these jobs under ``key`` (others are ignored)."""
+    """The rows on disk computed for these jobs under ``key`` by this :data:`ROWS_VERSION`
+    (others are ignored)."""
     out = {}
     for j in jobs:
         try:
             m = json.loads((folder / f"{j.name}.json").read_text())
         except (OSError, ValueError):
             continue
-        if isinstance(m, dict) and m.get("key") == key and m.get("job") == dataclasses.asdict(j):
+        if (isinstance(m, dict) and m.get("key") == key and m.get("version") == ROWS_VERSION
+                and m.get("job") == dataclasses.asdict(j)):
             out[j.name] = m["row"]
     return out
