@@ -19,8 +19,9 @@ Linear solver (what we chose and why)
 -------------------------------------
 * k small (3 k n_H <= ``dense_limit`` = 400): the reduced Jacobian is formed and LU-factorized
   (about a millisecond; the bordered determinant then also orients the continuation tangent).
-* k large: the dense 3 k n_H system (7140 for 340 elements, H = 3; ~7 s per LU here) is never
-  factorized. GMRES runs on it matrix-free (one receptance product per iteration: modal low rank
+* k large: the dense 3 k n_H system (7140 for 340 elements, H = 3; ~6 s per LU here) is
+  factorized only for a determinant's sign at corner folds and where GMRES fails, in mixed
+  precision (``dense.lu_solve_sign``). Otherwise GMRES runs on it matrix-free (one receptance product per iteration: modal low rank
   + the dense static residual block), preconditioned by ``preconditioner.
   ElementBlockPreconditioner``: each element's own block I + G_ee D_e (all harmonics coupled)
   inverted exactly, rebuilt at every solve (k small inverses). It replaced (issue 16, session 7)
@@ -44,6 +45,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .continuation import ContinuationSettings, FRFResult, continue_frf
+from .dense import lu_solve_sign
 from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 from .friction import FrictionContacts, once
@@ -263,7 +265,8 @@ class HarmonicBalance:
         self._gmres_failed = False                    # the last GMRES solve failed
         self.krylov_tol = float(krylov_tol)
         self.stats = {"residuals": 0, "jacobians": 0, "linear_solves": 0, "gmres_iterations": 0, "sign_factorizations": 0,
-                      "dense_fallbacks": 0, "dense_after_fallback": 0, "preconditioners": 0}
+                      "dense_fallbacks": 0, "dense_after_fallback": 0, "preconditioners": 0,
+                      "lu_single": 0, "lu_double": 0}
 
     # ------------------------------------------------------------------ layouts
     def to_contact(self, U: np.ndarray) -> np.ndarray:
@@ -469,8 +472,7 @@ class HarmonicBalance:
             except ConvergenceError:
                 J = self._dense_fallback(omega, nl, Dg)
         if J is not None:
-            X = sla.lu_solve(sla.lu_factor(J, overwrite_a=True, check_finite=False), B,
-                             check_finite=False)
+            X, _ = lu_solve_sign(J, B, self.stats)
         return [r - self._expand(omega, nl, cn, idx, Dg, X[:, i]) for i, r in enumerate(rhs)]
 
     def _dense_fallback(self, omega, nl, Dg, out=None):
@@ -545,9 +547,8 @@ class HarmonicBalance:
                 J = self._dense_fallback(omega, nl, Dg, out=A[:P, :P])
         if J is not None:
             A[:P, P], A[P, :P], A[P, P] = RwN, v, beta
-            lu, piv = sla.lu_factor(A, overwrite_a=True, check_finite=False)
-            Z = sla.lu_solve((lu, piv), Bm, check_finite=False)
-            sign = int(np.prod(np.sign(np.diag(lu)))) * (-1) ** int(np.sum(piv != np.arange(P + 1)))
+            # mixed precision above dense.MIXED_SIZE, the sign only where certified
+            Z, sign = lu_solve_sign(A, Bm, self.stats)
         out = []
         for i, (R, c) in enumerate(rhs):
             xN, dw = Z[:P, i], Z[P, i]
