@@ -48,7 +48,10 @@ def _find_peak(inp, joint: JointModel, level: float, lin, prev, f_lin_prev, stat
         try:
             # the peak moves about as the stuck frequency does; start just above it
             f_start = prev.peak_hz * lin.frequency / f_lin_prev * (1 + PEAK_START_MARGIN)
-            curve, state = peak_near(inp.rm, joint, level, f_start, state, inp.settings)
+            # polished, not refined: passes are compared to kt_tol, and the converged joint's
+            # full FRF refines its peak
+            curve, state = peak_near(inp.rm, joint, level, f_start, state, inp.settings,
+                                     refine=False)
             return curve, state, "local", None
         except ConvergenceError as e:
             why = " ".join(str(e).split())
@@ -94,8 +97,8 @@ def run_v3(inp, rq: float, level: float) -> dict:
     Rq = 15 µm, and a fixed factor 0.5 to creep, 5–6 passes), and finds the new peak by a short
     continuation from the previous one (:func:`~fe_joint.study.frf.peak_near`; a full sweep if
     that fails). It stops when the peak frequency and amplitude change by less than
-    ``contact.kt_tol``; the converged joint then gets its full FRF (whose polished peak is the
-    last pass's, recorded in the history as a check).
+    ``contact.kt_tol``; the converged joint then gets its full FRF, whose refined peak is the
+    last pass's polished one to about 1e-6 (both in the history, a check).
 
     Args:
         inp: the study's inputs (StudyInputs).

@@ -239,15 +239,21 @@ PEAK_GAP = 2e-4
 
 
 def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.ndarray,
-              settings: SweepSettings, max_points: int = 80) -> tuple[CurveResult, np.ndarray]:
+              settings: SweepSettings, max_points: int = 80,
+              refine: bool = True) -> tuple[CurveResult, np.ndarray]:
     """The resonance peak of ``joint`` near ``f_guess``, without sweeping the whole band.
 
     For the v3 fixed point, whose joint changes little from pass to pass: Newton at ``f_guess``
     from ``guess`` (the previous pass's peak contact harmonics, as returned here and by
     :func:`frf_with_peak`), then pseudo-arc-length continuation from
     there in the direction in which the amplitude grows (turning points included) until it has
-    passed its maximum, then the same parabolic polish as :func:`frf`. The returned curve holds
-    only the points of that short branch (stability not computed: all marked stable).
+    passed its maximum, then the same parabolic polish and (``refine``) golden-section peak search
+    as :func:`frf`. The returned curve holds only the points of that short branch (stability not
+    computed: all marked stable).
+
+    ``refine=False`` keeps the polished peak (to about 1e-6 in frequency): the v3 fixed point's
+    passes compare peaks to ``contact.kt_tol`` (1e-3), and the search to 1e-9 at tight tolerances
+    was half of a local pass (6 of 11-13 s on the default model at the middle level).
 
     Returns:
         (CurveResult, contact harmonics at the peak (ne, 3, 2H+1)).
@@ -271,7 +277,9 @@ def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.nda
         raise SweepIncomplete(f"no resonance peak of {joint.name} at {level:.4g} N within "
                               f"±{100 * PEAK_WINDOW:g} % of {f_guess:.2f} Hz") from None
     omega, amp = branch.omega, branch.amplitude
-    peak_sol = _refine_peak(hb, force, dof, _polish_peak(hb, force, dof, branch, k))
+    peak_sol = _polish_peak(hb, force, dof, branch, k)
+    if refine:
+        peak_sol = _refine_peak(hb, force, dof, peak_sol)
     order = np.argsort(omega)   # a short branch near the peak: shown by frequency
     cr = _curve_result(hb, rm, joint, level, act, peak_sol, omega[order], amp[order],
                        np.ones(len(omega), bool), its, t0)
