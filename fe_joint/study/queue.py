@@ -1,13 +1,15 @@
-"""The MPI job queue of the dynamics stage: ranks take jobs from one queue, longest first; rank 0
-serves it from a thread and writes each result as it arrives (a killed run loses only the jobs
-in flight)."""
+"""The MPI job queue of the dynamics and speed stages: ranks take jobs from one queue, longest
+first, each job once the jobs it needs are written; rank 0 serves it from a thread and writes
+each result as it arrives (a killed run loses only the jobs in flight)."""
 from __future__ import annotations
 
+import threading
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterable
 
 from ..errors import JobFailed, classify
+
 
 def _attempt(run_job: Callable, job) -> tuple[dict | None, tuple | None]:
     """``run_job(job)``, with a failure turned into (job, exit code, message) that can cross ranks."""
@@ -21,10 +23,81 @@ def _attempt(run_job: Callable, job) -> tuple[dict | None, tuple | None]:
 _TAG = 77
 #: how often rank 0's queue server looks for requests, s (jobs take 5–600 s)
 POLL_SECONDS = 0.05
+#: what the schedule answers when no job is ready yet but some are in flight
+_WAIT = object()
+
+
+class _Schedule:
+    """The jobs still to deal, in order, each dealt once the jobs it needs are written (rank 0;
+    the server thread and rank 0's own loop share it under ``lock``).
+
+    ``after(job)``: names of the jobs that must be written first (names not in this queue count
+    as written). ``prepare(job)``: called when the job is about to be dealt; returns the job to
+    run (e.g. with a cache key that needed the earlier jobs' results) or None when there is
+    nothing to run (it counts as written at once).
+    """
+
+    def __init__(self, todo: list, after: Callable | None, prepare: Callable | None,
+                 progress: Callable | None) -> None:
+        self.pending = list(todo)
+        names = {j.name for j in todo}
+        self.needs = {j.name: set(after(j)) & names if after is not None else set() for j in todo}
+        self.prepare, self.progress = prepare, progress
+        self.done: set[str] = set()
+        self.flying: set[str] = set()
+        self.failure = None
+        self.lock = threading.Lock()
+
+    def next_job(self):
+        """The first ready job (marked in flight), ``_WAIT`` when none is ready but some are in
+        flight, or None when the queue is finished (or failed)."""
+        with self.lock:
+            while self.failure is None:
+                ready = next((j for j in self.pending if self.needs[j.name] <= self.done), None)
+                if ready is None:
+                    if self.pending and not self.flying:
+                        # nothing runs and nothing can start: a job needs one that never comes
+                        self.failure = (self.pending[0].name, 1, "job queue: unmet dependencies "
+                                        f"{sorted(self.needs[self.pending[0].name] - self.done)}",
+                                        None)
+                        return None
+                    return _WAIT if self.pending else None
+                self.pending.remove(ready)
+                job = ready
+                if self.prepare is not None:
+                    try:
+                        job = self.prepare(ready)
+                    except Exception as e:  # noqa: BLE001 - reported on every rank
+                        code, msg = classify(e)
+                        self.failure = (ready.name, code, msg, e)
+                        return None
+                if job is None:
+                    self.done.add(ready.name)
+                    if self.progress is not None:
+                        self.progress(ready)
+                    continue
+                self.flying.add(job.name)
+                return job
+            return None
+
+    def finished(self, job, write_job: Callable, folder: Path, r, fail) -> None:
+        """A job's outcome: written (and its dependants freed), or the queue's failure."""
+        with self.lock:
+            self.flying.discard(job.name)
+            if fail is not None:
+                if self.failure is None:
+                    self.failure = fail
+                return
+            write_job(folder, job, r)
+            self.done.add(job.name)
+            if self.progress is not None:
+                self.progress(job)
 
 
 def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, comm=None,
-             progress=None, skip_done: bool = True) -> None:
+             progress=None, skip_done: bool = True,
+             after: Callable[[object], Iterable[str]] | None = None,
+             prepare: Callable | None = None) -> None:
     """Run the jobs not yet on disk, dealt dynamically to the ranks, longest first.
 
     With ``skip_done`` a job whose ``<name>.json`` marker exists is skipped; without it rank 0's
@@ -36,25 +109,35 @@ def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, c
     run loses only the jobs in flight. Jobs are deterministic: which rank runs one does not change
     its result. A failed job stops the handing out; every rank then raises
     :class:`~fe_joint.errors.JobFailed` with the original's exit class.
+
+    Args:
+        run_job: job → result (any rank; it may read the files of the jobs it needs).
+        write_job: (folder, job, result) → None, on rank 0 as each result arrives.
+        jobs: rank 0's jobs in dealing order (other ranks' are ignored).
+        folder: where the ``<name>.json`` markers are (``skip_done``).
+        comm: MPI communicator or None (serial).
+        progress: optional callable(job) after each job written or found cached.
+        after: job → names of the jobs whose results it reads: it is dealt only once they are
+            written (a rank that asks meanwhile waits). So a job that needs another starts as
+            soon as that one is done, not after a whole round.
+        prepare: job → the job to run, or None if nothing needs running (rank 0, when the job
+            is about to be dealt, its needs written): for jobs whose cache key depends on
+            earlier results.
     """
     rank = comm.rank if comm is not None else 0
     size = comm.size if comm is not None else 1
     todo = None
     if rank == 0:
         todo = [j for j in jobs if not (skip_done and (folder / f"{j.name}.json").exists())]
-    if comm is not None:
-        todo = comm.bcast(todo, root=0)
+    sched = _Schedule(todo, after, prepare, progress) if rank == 0 else None
     failure = None
     if size == 1:
-        for job in todo:
-            r, failure = _attempt(run_job, job)
-            if failure is not None:
-                break
-            write_job(folder, job, r)
-            if progress is not None:
-                progress(job)
+        while (job := sched.next_job()) is not None:
+            r, fail = _attempt(run_job, job)      # one rank: nothing in flight to wait for
+            sched.finished(job, write_job, folder, r, fail)
+        failure = sched.failure
     elif rank == 0:
-        failure = _serve_and_work(run_job, write_job, todo, folder, comm, progress)
+        failure = _serve_and_work(run_job, write_job, sched, folder, comm)
     else:
         msg = ("ask", None, None, None)
         while True:
@@ -65,8 +148,6 @@ def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, c
             r, fail = _attempt(run_job, job)
             msg = ("result", job, r, None) if fail is None else ("failed", job, None, fail[:3])
     if comm is not None:
-        if rank != 0:
-            failure = None
         info = comm.bcast(None if failure is None else failure[:3], root=0)
         comm.barrier()
     else:
@@ -76,50 +157,47 @@ def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, c
         raise JobFailed(*info) from own
 
 
-def _serve_and_work(run_job: Callable, write_job: Callable, todo: list, folder: Path, comm,
-                    progress):
+def _serve_and_work(run_job: Callable, write_job: Callable, sched: _Schedule, folder: Path,
+                    comm):
     """Rank 0: hand out jobs from a thread while working through the same queue."""
-    import threading
-    from collections import deque
-    queue = deque(todo)
-    lock = threading.Lock()
-    state = {"failure": None}
-
-    def next_job():
-        with lock:
-            return queue.popleft() if queue and state["failure"] is None else None
-
-    def finished(job, r, fail):
-        with lock:
-            if fail is not None:
-                if state["failure"] is None:
-                    state["failure"] = fail
-                return
-            write_job(folder, job, r)
-            if progress is not None:
-                progress(job)
 
     def serve():
         from mpi4py import MPI
         working = comm.size - 1
+        waiting: list[int] = []            # ranks that asked while no job was ready
         while working:
             st = MPI.Status()
             # Open MPI's blocking receive busy-polls: in this thread it would take a core from
             # the ranks' work (it halved their speed on 2 cores). Probe, and sleep in between.
             while not comm.Iprobe(source=MPI.ANY_SOURCE, tag=_TAG, status=st):
+                if waiting:
+                    break
                 time.sleep(POLL_SECONDS)
-            kind, job, r, fail = comm.recv(source=st.Get_source(), tag=_TAG)
-            if kind in ("result", "failed"):
-                finished(job, r, fail)
-            nxt = next_job()
-            comm.send(nxt, dest=st.Get_source(), tag=_TAG)
-            if nxt is None:
-                working -= 1
+            else:
+                kind, job, r, fail = comm.recv(source=st.Get_source(), tag=_TAG)
+                if kind in ("result", "failed"):
+                    sched.finished(job, write_job, folder, r, fail)
+                waiting.append(st.Get_source())
+            still = []
+            for src in waiting:
+                nxt = sched.next_job()
+                if nxt is _WAIT:
+                    still.append(src)
+                    continue
+                comm.send(nxt, dest=src, tag=_TAG)
+                if nxt is None:
+                    working -= 1
+            waiting = still
+            if waiting:
+                time.sleep(POLL_SECONDS)
 
     server = threading.Thread(target=serve, name="fe-joint-jobs", daemon=True)
     server.start()
-    while (job := next_job()) is not None:
+    while (job := sched.next_job()) is not None:
+        if job is _WAIT:
+            time.sleep(POLL_SECONDS)
+            continue
         r, fail = _attempt(run_job, job)
-        finished(job, r, fail)
+        sched.finished(job, write_job, folder, r, fail)
     server.join()
-    return state["failure"]
+    return sched.failure

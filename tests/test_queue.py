@@ -1,0 +1,106 @@
+"""The job queue (fe_joint.study.queue.run_jobs): dependencies, prepare, failures; serial and on
+2 ranks."""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import pytest
+
+from fe_joint.errors import JobFailed
+from fe_joint.study.queue import run_jobs
+
+
+@dataclass(frozen=True)
+class _Job:
+    name: str
+    needs: tuple = ()
+    seconds: float = 0.0
+    key: str = ""
+
+
+def _write(folder: Path, job: _Job, r: dict) -> None:
+    (folder / f"{job.name}.json").write_text(json.dumps(r))
+
+
+def _run_reading(folder: Path):
+    """A job that reads the files of the jobs it needs (as a dynamics job does) and sums them;
+    a needed job that wrote nothing (skipped by prepare) counts 0."""
+    def run(job: _Job) -> dict:
+        time.sleep(job.seconds)
+        got = [json.loads((folder / f"{n}.json").read_text())["value"]
+               for n in job.needs if (folder / f"{n}.json").exists()]
+        return {"value": 1 + sum(got), "key": job.key}
+    return run
+
+
+def test_dependencies_order_prepare_and_skip(tmp_path) -> None:
+    """A job is dealt only after the jobs it needs are written, whatever the list order; prepare
+    sets a key from their results or skips a job (it counts as done, its dependants run); the
+    values are those of the dependency tree."""
+    jobs = [_Job("d", ("b", "c")), _Job("b", ("a",)), _Job("c", ("a", "skipped")),
+            _Job("a"), _Job("skipped"), _Job("e")]
+    order, seen = [], []
+
+    def prepare(job):
+        seen.append(job.name)
+        if job.name == "skipped":
+            return None
+        if job.name == "d":                   # a key that needs b's and c's results
+            vals = [json.loads((tmp_path / f"{n}.json").read_text())["value"] for n in ("b", "c")]
+            return replace(job, key=f"k{sum(vals)}")
+        return job
+
+    run = _run_reading(tmp_path)
+
+    def run_logged(job):
+        order.append(job.name)
+        return run(job)
+    progress = []
+    run_jobs(run_logged, _write, jobs, tmp_path, after=lambda j: j.needs, prepare=prepare,
+             progress=lambda j: progress.append(j.name), skip_done=False)
+    # in list order among the ready ones: d waits for b and c, which wait for a
+    assert order == ["a", "b", "c", "d", "e"]
+    assert "skipped" in seen and sorted(progress) == sorted(j.name for j in jobs)
+    val = {j.name: json.loads((tmp_path / f"{j.name}.json").read_text()) for j in jobs
+           if j.name != "skipped"}
+    assert not (tmp_path / "skipped.json").exists()
+    assert {k: v["value"] for k, v in val.items()} == {"a": 1, "b": 2, "c": 2, "d": 5, "e": 1}
+    assert val["d"]["key"] == "k4"
+
+
+def test_missing_dependency_result_and_cycle_fail(tmp_path) -> None:
+    """A job whose run fails stops the queue with its exit class; a dependency cycle is reported
+    as unmet dependencies, not waited for forever."""
+    jobs = [_Job("a"), _Job("b", ("a",))]
+
+    def bad(job):
+        raise ValueError("no")
+    with pytest.raises(JobFailed) as e:
+        run_jobs(bad, _write, jobs, tmp_path, after=lambda j: j.needs, skip_done=False)
+    assert e.value.job == "a" and not (tmp_path / "b.json").exists()
+    cyc = [_Job("x", ("y",)), _Job("y", ("x",))]
+    with pytest.raises(JobFailed, match="unmet dependencies"):
+        run_jobs(_run_reading(tmp_path), _write, cyc, tmp_path, after=lambda j: j.needs,
+                 skip_done=False)
+
+
+@pytest.mark.mpi
+def test_dependencies_on_two_ranks(tmp_path_factory) -> None:
+    """On 2 ranks a job listed first but needing a slow one waits for it (the asking rank is
+    answered once it is written) while the other ready jobs go on; results equal the serial
+    run's."""
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD
+    if comm.size == 1:
+        pytest.skip("needs mpirun -n 2 (scripts/test runs it)")
+    d = Path(comm.bcast(str(tmp_path_factory.mktemp("q")) if comm.rank == 0 else None, root=0))
+    jobs = [_Job("slow", (), 0.6), _Job("late", ("slow",)), _Job("q1", (), 0.1), _Job("q2", ()),
+            _Job("last", ("late", "q1"))]
+    run_jobs(_run_reading(d), _write, jobs, d, comm=comm, after=lambda j: j.needs,
+             skip_done=False)
+    if comm.rank == 0:
+        val = {j.name: json.loads((d / f"{j.name}.json").read_text())["value"] for j in jobs}
+        assert val == {"slow": 1, "late": 2, "q1": 1, "q2": 1, "last": 4}
