@@ -19,10 +19,10 @@ from ..study import stiffness_definitions as stiff_defs
 from ..study import variants
 from ..study import jobs as study
 from ..study.artifacts import (CurveKey, load_artifact, load_backbones, load_curves, read_json_artifact,
-                               rq_label, v3_pass0_file)
+                               rq_label)
 from ..study.configurations import (choose_levels, fixed_joints, joint_baseline,
                                     like_for_like_joints)
-from ..study.frf import CurveResult, SweepSettings
+from ..study.frf import SweepSettings
 from ..study.queue import run_jobs
 from . import guards
 from .runner import StageContext
@@ -147,23 +147,6 @@ def _curve_summary(cr) -> dict:
             "unstable_points": int(np.sum(~cr.stable))}
 
 
-def _v3_outputs(folder, jobs: list, comm) -> dict:
-    """Rank 0 reads the finished v3 fixed points the follow-up jobs need; every rank gets them."""
-    out = None
-    if comm is None or comm.rank == 0:
-        out = {}
-        for rq in sorted({j.rq_um for j in jobs}):
-            name = study.v3_job_name(rq)
-            rec = read_json_artifact(folder / f"{name}.json")
-
-            def arrays(p):
-                with np.load(p) as a:
-                    return {"kn": a["kn"], "kt": a["kt"]}
-            out[rq] = {**load_artifact(folder / f"{name}.arrays.npz", arrays), "f_lin": rec["f_lin"],
-                       "pass0": load_artifact(folder / v3_pass0_file(rq), CurveResult.load)}
-    return comm.bcast(out, root=0) if comm is not None else out
-
-
 def study_inputs(ctx: StageContext) -> tuple[study.StudyInputs, dict]:
     """What the dynamics stage's jobs read, from the fe and contact stages' artifacts: the
     reduced model, interface, surfaces, the fixed configurations' joints (and the like-for-like
@@ -221,31 +204,31 @@ def stage_dynamics(ctx: StageContext) -> dict:
     ctx.print(f"[fe-joint] dynamics: levels {', '.join(f'{x:.3g}' for x in levels)} N "
               f"(macroslip estimate {level_info['macroslip']:.3g} N), {len(todo)} of "
               f"{len(every)} jobs to run ({len(every) - len(todo)} cached)")
-    # the backbones need the v3 fixed points' converged k and the forced peaks' amplitudes:
-    # they run after the FRF jobs, on the same queue, and are cached as the curves are (their
-    # keys are known once the curves they read are)
+    # one queue for every FRF, v3 and backbone job, each dealt once the jobs it reads are
+    # written: the follow-up jobs after their v3 fixed point, a backbone after its joint's
+    # forced curves (its cache key needs their peaks: keyed, or skipped when cached, just before
+    # it is dealt), the layer joints' backbones (issue 13) after their parent's curves; longest
+    # first among the ready ones
     bb_jobs = study.backbone_jobs(c)
+    alts = stiff_defs.layer_joints(inp, stiff_defs.bulk_stiffness(inp.setup))
+    run_now = [j for j in every if j.name in names]
+    # the order among ready jobs: the v3 fixed points, their follow-ups (the v3 joint's top-level
+    # curve is long), the top-level curves, the layer joints' backbones (the stiff one is long),
+    # the other curves from the top level down, the small-excitation check, the backbones
+    by_level = sorted((j for j in run_now if j.kind == "curve"),
+                      key=lambda j: -1 if j.level_index is None else j.level_index, reverse=True)
+    top = [j for j in by_level if j.level_index == len(levels) - 1]
+    queue = ([j for j in run_now if j.kind == "v3"]
+             + [j for j in run_now if j.kind in study.FOLLOW_UP] + top + list(alts)
+             + [j for j in by_level if j not in top] + bb_jobs)
     bar = None
-    if ctx.rank == 0 and ctx.progress and todo:
+    if ctx.rank == 0 and ctx.progress and queue:
         from tqdm import tqdm
-        bar = tqdm(total=len(todo) + len(bb_jobs), desc="dynamics", unit="job")
+        bar = tqdm(total=len(queue), desc="dynamics", unit="job")
     tick = (lambda job: bar.update(1)) if bar is not None else None
-
-    def run(inputs, jobs):
-        run_jobs(lambda job: study.run_job(inputs, job), study.write_job,
-                 [j for j in jobs if j.name in names], folder, ctx.comm, tick, skip_done=False)
-    run(inp_tiny, tiny)
-    run(inp, first)
-    if any(j.name in names for j in later):
-        inp.v3_out = _v3_outputs(folder, later, ctx.comm)
-        run(inp, later)
-    bb_todo = study.plan_backbones(inp, folder, bb_jobs, rm_key) if ctx.rank == 0 else []
-    if ctx.comm is not None:
-        bb_todo = ctx.comm.bcast(bb_todo, root=0)
-    if bar is not None:
-        bar.update(len(bb_jobs) - len(bb_todo))
-    run_jobs(lambda job: study.run_backbone_job(inp, folder, job), study.write_backbone_job,
-             bb_todo, folder, ctx.comm, tick, skip_done=False)
+    sched = study.DynamicsQueue(inp, inp_tiny, folder, every, alts, rm_key)
+    run_jobs(sched.run, sched.write, queue, folder, ctx.comm, tick, skip_done=False,
+             after=sched.after, prepare=sched.prepare)
     # the k_t definitions at the v3 peaks and the alternative joints' backbones (issue 13)
     t0 = time.perf_counter()
     defs = stiff_defs.dynamics_study(inp, folder, ctx.comm)

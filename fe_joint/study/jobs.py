@@ -429,3 +429,96 @@ def write_backbone_job(folder: Path, job: Job, r: dict) -> None:
          "files": file_record(folder, [folder / f for f in job.files[:-1]]), "seconds": br.seconds,
          "points": int(br.omega.size), "newton_iterations": br.newton_iterations}, default=float))
     tmp.replace(folder / f"{job.name}.json")
+
+
+def read_v3_output(folder: Path, rq: float) -> dict:
+    """A finished v3 fixed point as its follow-up jobs read it: converged "kn", "kt", "f_lin" and
+    the pass-0 curve "pass0" (any rank; the files are written before the job counts as done)."""
+    name = v3_job_name(rq)
+    rec = json.loads((Path(folder) / f"{name}.json").read_text())
+
+    def arrays(p):
+        with np.load(p) as a:
+            return {"kn": a["kn"], "kt": a["kt"]}
+    return {**load_artifact(Path(folder) / f"{name}.arrays.npz", arrays), "f_lin": rec["f_lin"],
+            "pass0": load_artifact(Path(folder) / v3_pass0_file(rq), CurveResult.load)}
+
+
+class DynamicsQueue:
+    """The dynamics stage's one job queue (:func:`~fe_joint.study.queue.run_jobs` callbacks):
+    which jobs a job reads (:meth:`after`), its cache key where that needs their results
+    (:meth:`prepare`), how it runs and how rank 0 writes it.
+
+    Jobs: the FRF and v3 jobs (:class:`Job`, the small-excitation check with its own inputs), the
+    backbones (:class:`Job` of kind "backbone", keyed once their forced curves exist, as
+    :func:`plan_backbones` does) and the layer joints' backbones of the stiffness-definition
+    study (``stiffness_definitions.AltJob``, planned into an ``AltTask``). Before session 8 these
+    ran in five rounds, each waiting for the last job of the one before: on the default case
+    one rank idled for about 55 s after the FRFs (the v3 joint's top-level curve ran alone) and
+    for about 100 s at the end (the stiff layer joint's backbone).
+
+    Args:
+        inp, inp_tiny: the study's inputs, and those of the small-excitation check.
+        folder: the dynamics folder.
+        frf_jobs: every FRF and v3 job of the study, keyed (the cached ones too: they say which
+            job writes which curve).
+        alts: {AltJob: JointModel} of the layer joints (``stiffness_definitions.layer_joints``).
+        rm_key: :func:`rm_digest` of the reduced model.
+    """
+
+    def __init__(self, inp: StudyInputs, inp_tiny: StudyInputs, folder: Path, frf_jobs: list,
+                 alts: dict, rm_key: str) -> None:
+        self.inp, self.inp_tiny, self.folder = inp, inp_tiny, Path(folder)
+        self.alts, self.rm_key = alts, rm_key
+        self.writers = [(k, j.name) for j in frf_jobs for k in j.curve_keys]
+
+    def _writers(self, configs: set, rq_um: float | None = None) -> set:
+        """Names of the jobs that write a forced curve of ``configs`` (v3: of surface rq_um)."""
+        return {n for k, n in self.writers if k.config in configs and k.level_index is not None
+                and (k.config != "v3" or k.rq_um == rq_um)}
+
+    def after(self, job) -> set:
+        """Names of the jobs whose files ``job`` reads."""
+        from .stiffness_definitions import AltJob
+        if isinstance(job, AltJob):
+            return self._writers({job.parent}, job.rq_um)
+        if job.kind in FOLLOW_UP:
+            return {v3_job_name(job.rq_um)}
+        if job.kind == "backbone":
+            configs = set(LIKE_FOR_LIKE.values()) if job.config in LIKE_FOR_LIKE else {job.config}
+            return self._writers(configs, job.rq_um)
+        return set()
+
+    def prepare(self, job):
+        """Rank 0, its needs written: a backbone keyed (None when cached, as plan_backbones), a
+        layer joint's backbone planned into an AltTask (None when cached); others as they are."""
+        from . import stiffness_definitions as sd
+        if isinstance(job, sd.AltJob):
+            task = sd.alt_task(self.inp, load_curves(self.folder), job, self.alts[job], self.rm_key)
+            return None if sd.alt_cached(self.folder, task) else task
+        if job.kind == "backbone":
+            return (plan_backbones(self.inp, self.folder, [job], self.rm_key) or [None])[0]
+        return job
+
+    def run(self, job) -> dict:
+        """Run one job (any rank)."""
+        from . import stiffness_definitions as sd
+        if isinstance(job, sd.AltTask):
+            return sd.run_alt(self.inp, job)
+        if job.kind == "backbone":
+            return run_backbone_job(self.inp, self.folder, job)
+        if job.level_index is None:
+            return run_job(self.inp_tiny, job)
+        if job.kind in FOLLOW_UP and job.rq_um not in self.inp.v3_out:
+            self.inp.v3_out[job.rq_um] = read_v3_output(self.folder, job.rq_um)
+        return run_job(self.inp, job)
+
+    def write(self, folder: Path, job, r: dict) -> None:
+        """Write a finished job (rank 0)."""
+        from . import stiffness_definitions as sd
+        if isinstance(job, sd.AltTask):
+            sd.write_alt(folder, job, r)
+        elif job.kind == "backbone":
+            write_backbone_job(folder, job, r)
+        else:
+            write_job(folder, job, r)

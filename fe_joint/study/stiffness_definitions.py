@@ -194,10 +194,12 @@ class AltJob:
         return self.key.name
 
 
-def alternative_joints(inp, loops: dict, v3: dict, bulk: BulkStiffness) -> dict:
-    """{AltJob: JointModel} of the alternatives whose parent configuration the study runs."""
+def layer_joints(inp, bulk: BulkStiffness) -> dict:
+    """{AltJob: JointModel} of the layer alternatives whose parent configuration the study runs:
+    they need only the parent's joint, not the v3 loops (the dynamics stage runs their backbones
+    beside the FRFs, :func:`alt_task`)."""
     c = inp.case
-    cfgs, v_rq = c.dynamics.configurations, c.roughness.v_rq_um
+    cfgs = c.dynamics.configurations
     out = {}
     if "smooth-ms" in cfgs:
         out[AltJob("smooth-ms-layer", None, "smooth-ms")] = layer_joint(
@@ -205,6 +207,14 @@ def alternative_joints(inp, loops: dict, v3: dict, bulk: BulkStiffness) -> dict:
     if "v2" in cfgs:
         out[AltJob("v2-layer", None, "v2")] = layer_joint(
             inp.joints["v2"], bulk, mindlin_ratio(c.material.poisson), name="v2-layer")
+    return out
+
+
+def alternative_joints(inp, loops: dict, v3: dict, bulk: BulkStiffness) -> dict:
+    """{AltJob: JointModel} of the alternatives whose parent configuration the study runs."""
+    c = inp.case
+    cfgs, v_rq = c.dynamics.configurations, c.roughness.v_rq_um
+    out = layer_joints(inp, bulk)
     if "v3" in cfgs and v_rq in loops and v_rq in v3:
         sc, v = inp.surfaces[v_rq], v3[v_rq]
         for k in ("secant", "energy"):
@@ -270,12 +280,10 @@ def dynamics_study(inp, folder: Path, comm=None, progress=None) -> dict:
              for rq in sorted(v3) if CurveKey("v3", mid, rq) in curves}
     stats = {rq_label(rq): {"rq_um": rq, **loop_statistics(d, inp.setup.area)} for rq, d in loops.items()}
     alts = alternative_joints(inp, loops, v3, bulk_stiffness(inp.setup))
-    plan = {job.name: (joint, stuck_modes(inp.rm.K, inp.rm.M, inp.rm.pair_dofs, joint).frequency,
-                       top_peak(curves, job.parent, job.rq_um, inp.levels[-1]))
-            for job, joint in alts.items()}
     if comm is None or comm.rank == 0:
         sub.mkdir(parents=True, exist_ok=True)
-    _run_backbones(inp, sub, list(alts), plan, comm, progress)
+    # the layer joints' backbones are usually done already (the stage ran them beside the FRFs)
+    plan = _run_backbones(inp, folder, alts, curves, comm, progress)
     joints = {job.name: {"parent": job.parent, "rq_um": job.rq_um, "kn_eq": j.k_eq("kn"),
                          "kt_eq": j.k_eq("kt"), "stuck_hz": plan[job.name][1]}
               for job, j in alts.items()}
@@ -287,31 +295,66 @@ def dynamics_study(inp, folder: Path, comm=None, progress=None) -> dict:
     return summary
 
 
-def _run_backbones(inp, sub: Path, jobs: list, plan: dict, comm, progress) -> None:
-    """Run the backbones of ``jobs`` not cached in ``sub`` on the job queue; rank 0 writes each
-    as ``<name>.npz`` and ``<name>.json`` (its key and file record)."""
-    from .backbone import backbone_key, compute_backbone, is_cached
+@dataclass(frozen=True)
+class AltTask:
+    """An alternative backbone to compute: the job, its plan (joint, stuck frequency Hz, top
+    amplitude mm) and its cache key (:func:`~.backbone.backbone_key`). ``name`` is the job's (the
+    queue's bookkeeping; the files are ``stiffness_definitions/<name>.*`` under the dynamics
+    folder)."""
+    job: AltJob
+    plan: tuple
+    cache_key: str
+
+    @property
+    def name(self) -> str:
+        return self.job.name
+
+
+def alt_task(inp, curves: dict, job: AltJob, joint: JointModel, rm_key: str) -> AltTask:
+    """The task of ``job``'s backbone, planned from the finished forced ``curves``."""
+    from .backbone import backbone_key
+    plan = (joint, stuck_modes(inp.rm.K, inp.rm.M, inp.rm.pair_dofs, joint).frequency,
+            top_peak(curves, job.parent, job.rq_um, inp.levels[-1]))
+    return AltTask(job, plan, backbone_key(rm_key, *plan, inp.levels, inp.settings))
+
+
+def alt_cached(folder: Path, task: AltTask) -> bool:
+    """Whether the task's backbone is on disk with its key (rank 0; ``folder`` the dynamics one)."""
+    from .backbone import is_cached
+    return is_cached(Path(folder) / FOLDER, task.job.name, task.cache_key)
+
+
+def run_alt(inp, task: AltTask) -> dict:
+    """Compute an alternative backbone: {"backbone": BackboneResult}."""
+    from .backbone import compute_backbone
+    joint, f_lin, a_top = task.plan
+    return {"backbone": compute_backbone(task.job.key, inp.rm, joint, f_lin, a_top, inp.levels,
+                                         inp.settings)}
+
+
+def write_alt(folder: Path, task: AltTask, r: dict) -> None:
+    """Write an alternative backbone (rank 0): ``<FOLDER>/<name>.npz`` and its ``.json`` record
+    (key and file record) last; ``folder`` the dynamics one."""
+    sub = Path(folder) / FOLDER
+    sub.mkdir(parents=True, exist_ok=True)
+    name = task.job.name
+    r["backbone"].save(sub / f"{name}.npz")
+    (sub / f"{name}.json").write_text(json.dumps(
+        {"job": name, "parent": task.job.parent, "seconds": r["backbone"].seconds,
+         "key": task.cache_key, "files": file_record(sub, [sub / f"{name}.npz"])}, default=float))
+
+
+def _run_backbones(inp, folder: Path, alts: dict, curves: dict, comm, progress) -> dict:
+    """Run the backbones of ``alts`` ({AltJob: JointModel}) not cached on the job queue; rank 0
+    writes each (:func:`write_alt`). Returns {name: (joint, stuck Hz, top amplitude mm)}."""
     from .jobs import rm_digest
     from .queue import run_jobs
     rm_key = rm_digest(inp.rm)
-    keys = {n: backbone_key(rm_key, *p, inp.levels, inp.settings) for n, p in plan.items()}
-    todo = ([j for j in jobs if not is_cached(sub, j.name, keys[j.name])]
-            if comm is None or comm.rank == 0 else None)
-    if comm is not None:
-        todo = comm.bcast(todo, root=0)
-
-    def run_one(job):
-        joint, f_lin, a_top = plan[job.name]
-        return {"backbone": compute_backbone(job.key, inp.rm, joint, f_lin, a_top, inp.levels,
-                                             inp.settings)}
-
-    def write_one(fold, job, r):
-        r["backbone"].save(Path(fold) / f"{job.name}.npz")
-        (Path(fold) / f"{job.name}.json").write_text(json.dumps(
-            {"job": job.name, "parent": job.parent, "seconds": r["backbone"].seconds,
-             "key": keys[job.name], "files": file_record(fold, [Path(fold) / f"{job.name}.npz"])},
-            default=float))
-    run_jobs(run_one, write_one, todo, sub, comm, progress, skip_done=False)
+    tasks = [alt_task(inp, curves, job, joint, rm_key) for job, joint in alts.items()]
+    todo = [t for t in tasks if not alt_cached(folder, t)] if comm is None or comm.rank == 0 else []
+    run_jobs(lambda t: run_alt(inp, t), write_alt, todo, Path(folder), comm, progress,
+             skip_done=False)
+    return {t.job.name: t.plan for t in tasks}
 
 
 def files(folder: Path, summary: dict) -> list[Path]:
