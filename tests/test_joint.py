@@ -45,6 +45,25 @@ def test_stuck_modes_two_masses() -> None:
     assert lin.frequency == pytest.approx(f_ref, rel=1e-10)
 
 
+def test_stuck_modes_kept_only_for_the_same_inputs() -> None:
+    """stuck_modes keeps its recent results: the same arrays and springs give the same object;
+    other springs, or an equal copy of K (not known to be unchanged), are computed anew and
+    give the analytic frequency."""
+    M, K, pd = _two_blocks()
+    m1, m2, A = 2e-3, 3e-3, 2.0
+
+    def joint(kt):
+        return JointModel("t", n0=np.array([1.0]), gap=np.zeros(1), kn=np.array([2 * kt]),
+                          kt=np.array([kt]), area=np.array([A]))
+    a = stuck_modes(K, M, pd, joint(5e4), n_modes=6)
+    assert stuck_modes(K, M, pd, joint(5e4), n_modes=6) is a      # an equal joint: kept
+    b = stuck_modes(K, M, pd, joint(2e4), n_modes=6)
+    assert b is not a
+    assert b.frequency == pytest.approx(np.sqrt(2e4 * A * (1 / m1 + 1 / m2)) / (2 * np.pi), rel=1e-10)
+    c = stuck_modes(K.copy(), M, pd, joint(5e4), n_modes=6)
+    assert c is not a and c.frequency == pytest.approx(a.frequency, rel=1e-12)
+
+
 def test_slip_onset_single_element() -> None:
     """One element: onset = macroslip = μN0 / (kt A |u_t| per N) with the resonant amplitude."""
     M, K, pd = _two_blocks()

@@ -8,6 +8,8 @@ small-excitation check and the choice of excitation levels.
 """
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -86,13 +88,47 @@ class LinearJoint:
         return float(self.frequencies[self.mode_index])
 
 
+#: the stuck modes computed lately (:func:`stuck_modes`), at most STUCK_CACHE_SIZE of them
+_STUCK_CACHE: OrderedDict = OrderedDict()
+STUCK_CACHE_SIZE = 16
+
+
+def _springs_digest(joint: JointModel) -> bytes:
+    """Digest of what the stuck stiffness reads from a joint: the loaded elements and their
+    k_t A, k_n A."""
+    c = np.asarray(joint.closed)
+    h = hashlib.blake2b(digest_size=16)
+    for a in (c, (joint.kt * joint.area)[c], (joint.kn * joint.area)[c]):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.digest()
+
+
 def stuck_modes(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: JointModel,
                 n_modes: int = 10) -> LinearJoint:
     """Lowest modes of the stuck structure; the breathing mode is the first elastic one.
 
     Rigid-body modes are recognised as those below 1 % of the highest computed frequency's
     hundredth (free–free structure: six of them).
+
+    The last ``STUCK_CACHE_SIZE`` results are kept, by the identity of K, M and pair_dofs (the
+    arrays are never modified in place) and the joint's springs: the report asked for the same
+    joints' modes from five of its sections, each a generalized eigenproblem of about 1 s at the
+    default model's 2198 DOFs. The returned object is shared: do not modify it.
     """
+    key = (id(K), id(M), id(pair_dofs), _springs_digest(joint), int(n_modes))
+    hit = _STUCK_CACHE.get(key)
+    if hit is not None and hit[0] is K and hit[1] is M and hit[2] is pair_dofs:
+        _STUCK_CACHE.move_to_end(key)
+        return hit[3]
+    lin = _stuck_modes(K, M, pair_dofs, joint, n_modes)
+    _STUCK_CACHE[key] = (K, M, pair_dofs, lin)
+    while len(_STUCK_CACHE) > STUCK_CACHE_SIZE:
+        _STUCK_CACHE.popitem(last=False)
+    return lin
+
+
+def _stuck_modes(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: JointModel,
+                 n_modes: int) -> LinearJoint:
     Ks = stuck_stiffness(K, pair_dofs, joint)
     n = Ks.shape[0]
     w2, phi = sla.eigh(Ks, M, subset_by_index=[0, min(n_modes, n) - 1])
