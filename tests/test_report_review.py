@@ -319,3 +319,14 @@ def test_provenance_times_ignore_the_report_stage(run):
            {"stage": "report", "action": "ran", "time": "T3"}, {"stage": "fe", "action": "cached", "time": "T4"}]
     p = provenance(dataclasses.replace(data, stage_log=log))
     assert (p["started"], p["finished"]) == ("T1", "T2")
+
+
+def test_timed_trends_fall_beyond_the_noise():
+    """The cost claims read wall times: a trend falls when no step rises by more than
+    TIMING_NOISE and the whole falls by more (two runs of one code: 0.36 → 0.12 → 0.12 and
+    0.54 → 0.14 → 0.14 s both fall); a clear rise or a fall within the noise does not."""
+    assert fd.TIMING_NOISE == 0.1
+    assert fd._falls_timed([0.54, 0.20, 0.14, 0.14]) and fd._falls_timed([0.36, 0.17, 0.12, 0.125])
+    assert not fd._falls_timed([32.9, 22.1, 20.1, 25.1])        # rises by 25 % at the end
+    assert not fd._falls_timed([1.0, 0.95, 0.97])               # falls by 3 % only
+    assert not fd._falls_timed([1.0])

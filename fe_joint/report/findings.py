@@ -76,6 +76,19 @@ def _monotone(y: list[float], falling: bool) -> bool:
     return bool(len(d) and np.all(d < 0 if falling else d > 0))
 
 
+#: relative run-to-run noise of a wall time (this machine: ±5–20 % with both ranks busy): a timed
+#: trend falls when no step rises by more than this and the whole falls by more (a strict test
+#: flipped the BEM cost verdict between two runs of one code, 0.12 → 0.12 s against 0.14 → 0.14 s)
+TIMING_NOISE = 0.1
+
+
+def _falls_timed(t: list[float]) -> bool:
+    """Whether wall times ``t`` fall, beyond :data:`TIMING_NOISE`."""
+    y = np.asarray(t, float)
+    return bool(y.size > 1 and np.all(y[1:] <= y[:-1] * (1 + TIMING_NOISE))
+                and y[-1] < y[0] * (1 - TIMING_NOISE))
+
+
 def _trend_text(rqs: list[float], y: list[float], fmt: str = "{:.4g}") -> str:
     return " → ".join(fmt.format(v) for v in y) + f" (Rq {' / '.join(rq_label(q) for q in rqs)} µm)"
 
@@ -625,7 +638,7 @@ def table2(data: ReportData, s: dict) -> Finding:
     rqs, t = [q for q, _ in sw], [secs[n] for _, n in names]
     act = [p["n_active"] for _, p in sw]
     tb = secs[f"baseline@L{data.mid}"]
-    ok = max(t) < tb and _monotone(t, True)
+    ok = max(t) < tb and _falls_timed(t)
     return Finding(
         "Table 2", "HBM cost", claim,
         f"at L{data.mid}: baseline {tb:.1f} s ({b['n_active']} active elements); v3 "
@@ -647,7 +660,7 @@ def table3(data: ReportData, s: dict) -> Finding:
                        NOT_COMPARABLE, "The contact stage recorded no per-surface times.")
     t = [sum(v for v in ct[rq_label(q)].values() if isinstance(v, (int, float))) for q in rqs]
     it = [data.surfaces[q].iterations for q in rqs]
-    ok = _monotone(t, True)
+    ok = _falls_timed(t)
     return Finding("Table 3", "BEM cost", claim,
                    "global solve + patches " + _trend_text(rqs, t, "{:.2f} s") + "; global CG iterations "
                    + " → ".join(map(str, it)) + ".", _v(ok),
