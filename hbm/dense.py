@@ -25,6 +25,8 @@ factorized in double precision (as below :data:`MIXED_SIZE`).
 """
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 from scipy.linalg import lapack
 
@@ -55,39 +57,64 @@ def _double(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, int]:
     return X, _sign(lu, piv)
 
 
-def lu_solve_sign(A: np.ndarray, B: np.ndarray, stats: dict | None = None) -> tuple[np.ndarray, int]:
+def lu_solve_sign(A: np.ndarray, B: np.ndarray, stats: dict | None = None,
+                  matvec: Callable | None = None,
+                  rebuild: Callable | None = None) -> tuple[np.ndarray, int]:
     """Solve A X = B by LU and return the sign of det A.
 
     Args:
-        A: (n, n) float64, C-ordered; overwritten (it holds the factors afterwards, or is
-            unchanged after a mixed-precision solve).
+        A: (n, n) C-ordered, float64 or (n >= MIXED_SIZE only) float32; overwritten (it holds
+            factors afterwards, or is unchanged after a mixed-precision solve of a float64 A).
+            A float32 A is the matrix rounded to single precision, formed so by the caller (half
+            the memory and time of forming it in double); then ``matvec`` and ``rebuild`` are
+            needed.
         B: (n, m) or (n,) right-hand sides.
         stats: optional counters, incremented: "lu_single" (mixed-precision solves that kept
             the single-precision factors), "lu_double" (double-precision factorizations).
+        matvec: x (n,) -> A x in double precision (the refinement's residuals of a float32 A).
+        rebuild: () -> A as float64 (C-ordered), for the double-precision factorization when a
+            float32 A's sign is not certified or its refinement stalls.
     Returns:
         (X with B's shape, sign of det A: +1 or -1, 0 if a pivot is exactly zero).
     """
     n = A.shape[0]
     B2 = B.reshape(n, -1)
-    if n >= MIXED_SIZE:
-        out = _mixed(A, B2)
+    single = A.dtype == np.float32
+    if single and (matvec is None or rebuild is None):
+        raise ValueError("a float32 matrix needs matvec and rebuild")
+    if n >= MIXED_SIZE or single:
+        out = _mixed(A, B2, matvec if single else None)
         if out is not None:
             if stats is not None:
                 stats["lu_single"] = stats.get("lu_single", 0) + 1
             return out[0].reshape(B.shape), out[1]
+        if single:
+            A = rebuild()
     if stats is not None:
         stats["lu_double"] = stats.get("lu_double", 0) + 1
     X, sign = _double(A, np.array(B2, dtype=float, order="F"))
     return X.reshape(B.shape), sign
 
 
-def _mixed(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, int] | None:
+def _mixed(A: np.ndarray, B: np.ndarray,
+           matvec: Callable | None = None) -> tuple[np.ndarray, int] | None:
     """Single-precision LU of A (A^T, Fortran-ordered), refined in double precision; None when
-    the sign is not certified or the refinement stalls (the caller factorizes in double)."""
-    At32 = A.T.astype(np.float32)                      # Fortran-ordered A^T, no copy in LAPACK
+    the sign is not certified or the refinement stalls (the caller factorizes in double).
+    A float32 A is factorized in place and the residuals come from ``matvec``; a float64 A is
+    copied to single precision and kept for the residuals."""
+    if A.dtype == np.float32:
+        At32 = A.T                                     # Fortran-ordered view: factorized in place
+
+        def residual(X):
+            return B - np.stack([matvec(X[:, j]) for j in range(X.shape[1])], axis=1)
+    else:
+        At32 = A.T.astype(np.float32)                  # Fortran-ordered A^T, no copy in LAPACK
+
+        def residual(X):
+            return B - A @ X
     absA = np.abs(At32)
-    a1 = float(absA.sum(axis=1).max())                 # ||A||_1 (column sums of A)
-    ainf = float(absA.sum(axis=0).max())               # ||A||_inf
+    a1 = float(absA.sum(axis=1, dtype=np.float64).max())     # ||A||_1 (column sums of A)
+    ainf = float(absA.sum(axis=0, dtype=np.float64).max())   # ||A||_inf
     del absA
     lu, piv, info = lapack.sgetrf(At32, overwrite_a=True)
     if info != 0:
@@ -101,9 +128,8 @@ def _mixed(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, int] | None:
 
     X = solve32(B)
     b1 = np.abs(B).sum(axis=0)
-    eta = 0.0
     for it in range(REFINE_ITERATIONS + 1):
-        R = B - A @ X
+        R = residual(X)
         # normwise backward error per column, infinity norm for the stopping test (as dsgesv)
         if it == 0:
             eta = float(np.max(np.abs(R).sum(axis=0) / (a1 * np.abs(X).sum(axis=0) + b1)))

@@ -45,7 +45,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .continuation import ContinuationSettings, FRFResult, continue_frf
-from .dense import lu_solve_sign
+from .dense import MIXED_SIZE, lu_solve_sign
 from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 from .friction import FrictionContacts, once
@@ -521,8 +521,11 @@ class HarmonicBalance:
                 out.append((-R - Rw * dw, dw))
             return out, int(np.sign(den))
         P = self.nH * 3 * nl.size
-        # the bordered matrix, J formed in place on the dense path (a 7413-unknown J is 440 MB)
-        A = np.empty((P + 1, P + 1))
+        # the bordered matrix, J formed in place on the dense path (a 7413-unknown J is 440 MB);
+        # above dense.MIXED_SIZE in single precision, as it is factorized (the refinement's
+        # residuals use the matrix-free operator in double)
+        single = P + 1 >= MIXED_SIZE
+        A = np.empty((P + 1, P + 1), np.float32 if single else float)
         cn, idx, matvec, J, prec = self._reduced(omega, nl, Dg, dense=exact_sign, out=A[:P, :P])
         if exact_sign and prec is None and self.nH * cn.size > self.dense_limit:
             self.stats["sign_factorizations"] += 1
@@ -548,7 +551,20 @@ class HarmonicBalance:
         if J is not None:
             A[:P, P], A[P, :P], A[P, P] = RwN, v, beta
             # mixed precision above dense.MIXED_SIZE, the sign only where certified
-            Z, sign = lu_solve_sign(A, Bm, self.stats)
+            if single:
+                op = self._operator(omega, nl, cn, idx, Dg)
+
+                def mv64(z):
+                    return np.concatenate([op(z[:P]) + RwN * z[P], [v @ z[:P] + beta * z[P]]])
+
+                def rebuild():
+                    A64 = np.empty((P + 1, P + 1))
+                    self._dense_jacobian(omega, cn, Dg, out=A64[:P, :P])
+                    A64[:P, P], A64[P, :P], A64[P, P] = RwN, v, beta
+                    return A64
+                Z, sign = lu_solve_sign(A, Bm, self.stats, matvec=mv64, rebuild=rebuild)
+            else:
+                Z, sign = lu_solve_sign(A, Bm, self.stats)
         out = []
         for i, (R, c) in enumerate(rhs):
             xN, dw = Z[:P, i], Z[P, i]
@@ -572,19 +588,31 @@ class HarmonicBalance:
             pre = self._pre = _PreconditionerCache(self.G, nl, omega, R, Psi, kind(R, Psi, Ls, Dg))
             self.stats["preconditioners"] += 1
 
-        def matvec(x):
-            ge = np.einsum("kxy,ky->kx", Dg, x[idx])
-            gv = np.empty(P)
-            gv[idx] = ge
-            v = gv.reshape(nH, p)
-            return x + ((R @ v.T).T + _modal_apply(Psi, Ls, v)).ravel()
-
+        matvec = self._operator(omega, nl, cn, idx, Dg, R, Psi, Ls)
         if pre is None:
             return matvec, kind(R, Psi, Ls, Dg)
         if self.preconditioner == "two-level":
             return matvec, TwoLevelPreconditioner(pre.apply, ElementBlockPreconditioner(R, Psi, Ls, Dg),
                                                   matvec)
         return matvec, pre.apply
+
+    def _operator(self, omega, nl, cn, idx, Dg, R=None, Psi=None, Ls=None) -> Callable:
+        """The reduced Jacobian J = I + G D as a matrix-free product x -> J x (double precision;
+        R, Psi and Ls are found when not given)."""
+        nH, p = self.nH, cn.size
+        P = nH * p
+        if R is None:
+            R, Psi = self._contact_rows(nl, cn)
+        if Ls is None:
+            Ls = [self.G.modal(h, omega) for h in range(self.H + 1)]
+
+        def matvec(x):
+            ge = np.einsum("kxy,ky->kx", Dg, x[idx])
+            gv = np.empty(P)
+            gv[idx] = ge
+            v = gv.reshape(nH, p)
+            return x + ((R @ v.T).T + _modal_apply(Psi, Ls, v)).ravel()
+        return matvec
 
     def _contact_rows(self, nl: np.ndarray, cn: np.ndarray):
         """R and Psi restricted to the nonlinear elements' coordinates cn, kept while the

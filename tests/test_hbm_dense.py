@@ -67,3 +67,39 @@ def test_sign_from_factors() -> None:
     assert dense._sign(lu, np.array([0, 1, 2])) == -1
     assert dense._sign(lu, np.array([1, 1, 2])) == 1          # one interchange
     assert dense._sign(np.diag([1.0, 0.0, 1.0]), np.array([0, 1, 2])) == 0
+
+
+def test_single_precision_matrix_with_double_operator() -> None:
+    """A matrix formed in single precision (the caller's float32 A): factorized in place, the
+    refinement's residuals from the double-precision operator, so the solution is the double
+    matrix's to double precision and the sign is its slogdet's; an uncertified sign rebuilds the
+    double matrix and factorizes that."""
+    n = dense.MIXED_SIZE + 5
+    rng = np.random.default_rng(11)
+    A = _matrix(n, rng)
+    A[0] *= -1
+    B = rng.normal(size=(n, 2))
+    ref = np.linalg.solve(A, B)
+    calls = []
+
+    def rebuild():
+        calls.append(1)
+        return A.copy()
+    st = {}
+    X, sign = dense.lu_solve_sign(A.astype(np.float32), B, st, matvec=lambda x: A @ x,
+                                  rebuild=rebuild)
+    assert st == {"lu_single": 1} and not calls
+    assert sign == int(np.linalg.slogdet(A)[0]) == -1
+    assert np.abs(X - ref).max() <= 1e-12 * np.abs(ref).max()
+    # condition number 1e6: not certified in single precision -> the rebuilt double matrix
+    sv = np.ones(n)
+    sv[-1] = 1e-6
+    A = _matrix(n, rng, sv)
+    st = {}
+    X, sign = dense.lu_solve_sign(A.astype(np.float32), B[:, :1], st, matvec=lambda x: A @ x,
+                                  rebuild=rebuild)
+    assert st == {"lu_double": 1} and len(calls) == 1
+    assert sign == int(np.linalg.slogdet(A)[0])
+    assert np.linalg.norm(A @ X - B[:, :1]) <= 1e-13 * np.linalg.norm(A, 2) * np.linalg.norm(X)
+    with pytest.raises(ValueError, match="matvec and rebuild"):
+        dense.lu_solve_sign(A.astype(np.float32), B, st)
