@@ -332,7 +332,7 @@ def _speed_tables(ctx: StageContext) -> dict:
             models.append((size, rm_s, sec, joint_baseline(su, c.contact.k_ref)))
     f_case = (stuck_modes(rm.K, rm.M, rm.pair_dofs, models[-1][3]).frequency if models else 0.0)
     jobs = se.speed_jobs(grids, knobs, len(models), (settings.harmonics, settings.samples))
-    ref: dict = {}     # the reference peak, read from disk before the second round
+    ref: dict = {}     # the reference peak, read from disk by the first row that needs it
 
     def run(job: se.SpeedJob) -> dict:
         if job.peak_of:
@@ -343,6 +343,8 @@ def _speed_tables(ctx: StageContext) -> dict:
             return se.mesh_row(models[job.model], f_case, cr.level, settings, cr.peak_hz)
         if job.table == "reference":
             return se.reference_row(rm, models[-1][3], cr.level, settings, cr.peak_hz)
+        if not ref:        # written before any row that needs it is dealt (after=)
+            ref.update(se.read_reference(folder, se.read_rows(folder, jobs, stage_key)))
         return se.hbm_row(rm, models[-1][3], cr.level, settings, ref, job.harmonics, job.samples)
 
     folder, stage_key = ctx.path("speed", "rows"), ctx.keys.get("speed", "")
@@ -354,11 +356,9 @@ def _speed_tables(ctx: StageContext) -> dict:
         for f in folder.glob("*.json") if folder.exists() else []:
             if f.stem not in keep:
                 f.unlink()
-    write = (lambda fold, job, row: se.write_row(fold, job, row, stage_key))
-    # two rounds: the harmonics and samples rows start from the reference's peak
-    run_jobs(run, write, [j for j in jobs if not j.needs_reference], folder, comm=ctx.comm)
-    ref.update(se.read_reference(folder, se.read_rows(folder, jobs, stage_key)))
-    run_jobs(run, write, [j for j in jobs if j.needs_reference], folder, comm=ctx.comm)
+    # the harmonics and samples rows start from the reference's peak: dealt once it is written
+    run_jobs(run, lambda fold, job, row: se.write_row(fold, job, row, stage_key), jobs, folder,
+             comm=ctx.comm, after=lambda j: {se.REFERENCE} if j.needs_reference else set())
     if ctx.rank != 0:
         return {}
     out = se.assemble_tables(jobs, se.read_rows(folder, jobs, stage_key), hs[-1])

@@ -4,8 +4,9 @@ Work is cut into *jobs* — one FRF of a fixed configuration at one level, or on
 (a full FRF, then short peak searches each followed by BEM loops on every element, then the full
 FRF of the converged joint) — that the MPI ranks take from a shared queue, longest first
 (:func:`fe_joint.study.queue.run_jobs`). Two follow-up kinds need a finished v3 fixed point and
-run after the others: the comparison surface's v3 joint at the other levels (``v3-level``), and
-its pass-0 FRF kept as the v2 curve at the middle level (``v2-pass0``, no solve).
+are dealt once it is written (:class:`DynamicsQueue`): the comparison surface's v3 joint at the
+other levels (``v3-level``), and its pass-0 FRF kept as the v2 curve at the middle level
+(``v2-pass0``, no solve).
 
 Each job has a cache *key*, the digest of everything it reads (:func:`job_key`): the reduced
 model's matrices, the joint's arrays (loads, gaps, k_n, k_t), the level in N, the stuck
@@ -48,7 +49,7 @@ from .frf import CurveResult, SweepSettings, frf
 
 #: bump when a job's result changes for the same inputs (its key changes with it)
 JOB_VERSION = "1"
-#: job kinds that need a finished v3 fixed point (run in the second round)
+#: job kinds that need a finished v3 fixed point (dealt once it is written: DynamicsQueue.after)
 FOLLOW_UP = ("v3-level", "v2-pass0")
 
 

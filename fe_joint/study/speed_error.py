@@ -305,7 +305,7 @@ def speed_jobs(grids, knobs: tuple[list, list] | None, n_models: int,
     """Every row of the stage as a job, the costly ones first (the queue deals them in order).
 
     The harmonics and samples rows need the reference job's peak (:attr:`SpeedJob.needs_reference`):
-    the stage runs them in a second round.
+    the stage's queue deals them once it is written (``run_jobs(after=)``).
 
     Args:
         grids: BEM grid sizes; knobs: :func:`knob_grid`'s (H, n_t) rows, None without the HBM
