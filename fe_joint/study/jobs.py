@@ -255,6 +255,12 @@ def read_marker(folder: Path, name: str) -> dict | None:
     return m if isinstance(m, dict) and "key" in m and "files" in m else None
 
 
+def _read_kn_kt(path: Path) -> dict:
+    """A v3 fixed point's converged {"kn", "kt"} (N/mm³) from its ``.arrays.npz``."""
+    with np.load(path) as a:
+        return {"kn": a["kn"], "kt": a["kt"]}
+
+
 def _load_job(folder: Path, job: Job, marker: dict) -> dict:
     """A finished job's result read back from its files (to be written under another name)."""
     old = Job(**{k: v for k, v in marker["job"].items() if k != "name"})
@@ -266,10 +272,7 @@ def _load_job(folder: Path, job: Job, marker: dict) -> dict:
                                                  ("history", "converged", "rq_um", "f_lin")
                                                  if k in marker}}
     if old.kind == "v3":
-        def arrays(p):
-            with np.load(p) as a:
-                return {"kn": a["kn"], "kt": a["kt"]}
-        r["arrays"] = load_artifact(folder / f"{old.name}.arrays.npz", arrays)
+        r["arrays"] = load_artifact(folder / f"{old.name}.arrays.npz", _read_kn_kt)
         r["pass0"] = load_artifact(folder / v3_pass0_file(old.rq_um), CurveResult.load)
     return r
 
@@ -437,11 +440,7 @@ def read_v3_output(folder: Path, rq: float) -> dict:
     the pass-0 curve "pass0" (any rank; the files are written before the job counts as done)."""
     name = v3_job_name(rq)
     rec = json.loads((Path(folder) / f"{name}.json").read_text())
-
-    def arrays(p):
-        with np.load(p) as a:
-            return {"kn": a["kn"], "kt": a["kt"]}
-    return {**load_artifact(Path(folder) / f"{name}.arrays.npz", arrays), "f_lin": rec["f_lin"],
+    return {**load_artifact(Path(folder) / f"{name}.arrays.npz", _read_kn_kt), "f_lin": rec["f_lin"],
             "pass0": load_artifact(Path(folder) / v3_pass0_file(rq), CurveResult.load)}
 
 
