@@ -5,9 +5,12 @@
   at ``max_domega`` (default range/100) so that flat parts cannot step over a narrow peak.
 * Tangent predictor: null vector of [J, dR/dw] from the bordered system with the previous tangent
   as last row, oriented so that the sign of the bordered determinant is that of the previous
-  point. The sign comes with the dense path's LU; a point solved by GMRES has none (0): it is
-  no reference, and the tangent after it keeps t . t_prev > 0. So a branch whose linear solves
-  switch between the two paths never compares a sign with one the other path did not compute.
+  point: with a consistently oriented tangent that sign is an invariant of the branch (it changes
+  only at a branch point). The sign comes with the dense path's LU; a point solved by GMRES has
+  none of its own, its tangent keeps t . t_prev > 0, and a smooth step (t . t_prev >=
+  ``SHARP_TURN``) carries the last known sign on (0 while none has been computed). So a branch
+  whose linear solves switch between the two paths never compares a sign with one the other
+  path did not compute or carry.
 * Corrector: damped Newton on {R(U, w) = 0, t . (Y - Y_pred) = 0}; the bordered system is solved
   directly (reduced on the nonlinear elements), so it stays regular at turning points.
 * Corner folds: with sampled piecewise-linear contact laws a turning point generically sits where
@@ -15,11 +18,15 @@
   ahead, the tangent of the piece beyond the corner is taken at the predictor, oriented by the
   determinant sign, and the corrector restarts from the corner along it. There the tangent can
   turn by more than 90 deg, and t . t_prev > 0 would send the branch back the way it came. So on
-  the GMRES path the signs at a corner (current point, predictor, the point accepted beyond it)
-  come from a dense LU of the bordered system (``linsolve_aug(exact_sign=True)``), and so do
-  both signs of a step whose GMRES tangent turned sharply (t . t_prev < ``SHARP_TURN``): a corner
-  fold can also be passed within one step. A few LUs per corner met; smooth GMRES stretches
-  need none.
+  the GMRES path the sign at the predictor comes from a dense LU of the bordered system
+  (``linsolve_aug(exact_sign=True)``), and so does the current point's while no sign is known
+  yet (the first corner of a branch); the point accepted beyond the corner is oriented by
+  t . t_beyond > 0 against the tangent of the piece it lies on. A step whose GMRES tangent turned
+  sharply (t . t_prev < ``SHARP_TURN``, a corner passed within one step, or a second corner right
+  after the first) gets its sign from a dense LU too. One LU per corner met, plus one per branch
+  and per sharp turn; smooth GMRES stretches need none. (Session 9: the carried signs equalled
+  freshly computed ones at all 28 corners of the default model's four top-level sweeps, and the
+  sweeps were point for point those of the former rule, which took three LUs per corner.)
 * Step length grows x1.5 after <= 3 corrector iterations, shrinks x0.7 after >= 7, halves on failure;
   ``ConvergenceError`` below ds_min. Turning points (sign changes of the w-component of the tangent)
   are listed in ``FRFResult.turning_points``.
@@ -387,6 +394,7 @@ class _Branch:
             self.ref_sign = -self.ref_sign
         # keep the Jacobian on each point only where Hill's method may use it (memory)
         self.keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
+        self.t_beyond = None      # tangent of the piece beyond the last corner restart
         self.sols, self.taus = [sol], [self.t[-1]]
         self.amp_prev = sol.amplitude(dof)
         self.amps = [self.amp_prev]
@@ -481,9 +489,10 @@ class _Branch:
         The branch turns back exactly where a time sample switches state, so no point exists on
         the hyperplane ahead. Take the tangent of the piece beyond the corner (Jacobian at the
         predictor Yp), orient it by the bordered-determinant sign, and restart the corrector from
-        the corner (the failed corrector's last iterate) along it. Both signs are exact (dense LU
-        on the GMRES path): the current point's, when it was solved by GMRES, is computed first
-        (the Jacobian there, its own tangent as last row) and becomes ``ref_sign``.
+        the corner (the failed corrector's last iterate) along it. The predictor's sign is exact
+        (dense LU on the GMRES path); the current point's is the sign carried along the branch,
+        computed here only when none is known yet (``_exact_reference``). The oriented tangent is
+        kept as ``t_beyond``, the orientation of the point accepted beyond the corner.
 
         Returns:
             (the restart's _Correction, accepted?: converged and moved by > 1e-3 ds from Y).
@@ -492,15 +501,16 @@ class _Branch:
         Up, wp = self.sc.unscale(Yp)
         evp = _evaluate(self.hb, self.force, Up, wp)
         tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign, exact_sign=True)
+        self.t_beyond = tb
         Yc = self.sc.Y(failed.U, failed.w)
         corr = _correct(self.hb, self.force, self.sc, Yc + self.ds * tb, tb, self.settings.max_corrector)
         self.total_it += corr.it
         return corr, bool(corr.ok and np.linalg.norm(self.sc.Y(corr.U, corr.w) - Y) > 1e-3 * self.ds)
 
     def _exact_reference(self) -> None:
-        """Make ``ref_sign`` known at the current point when it was solved by GMRES (0): the sign
-        of the bordered determinant with its own tangent as last row, by a dense LU (one more
-        evaluation of the Jacobian there)."""
+        """Make ``ref_sign`` known at the current point when no sign has been computed on the
+        branch yet (0): the sign of the bordered determinant with its own tangent as last row, by
+        a dense LU (one more evaluation of the Jacobian there)."""
         if not self.ref_sign:
             ev = _evaluate(self.hb, self.force, self.U, self.w)
             _, self.ref_sign = _tangent(self.hb, self.force, self.sc, self.w, ev, self.t, None,
@@ -509,18 +519,21 @@ class _Branch:
     def _accept(self, corr: _Correction, beyond_corner: bool = False) -> None:
         """Make the corrected point current: new tangent, Solution, amplitude, next step.
 
-        The new tangent is oriented by the exact determinant signs of both points (dense LU on
-        the GMRES path) where the branch may have passed a corner fold: after a corner restart
-        (``beyond_corner``) and where the GMRES tangent turned by more than acos(SHARP_TURN)."""
+        The new tangent is found with the tangent of the piece the point lies on as last row:
+        the previous point's, or after a corner restart (``beyond_corner``) ``t_beyond``. A GMRES
+        tangent that turned from it by less than acos(SHARP_TURN) keeps t . prev > 0 and carries
+        the branch's sign on; one that turned more is oriented by exact determinant signs (dense
+        LU), as where the branch may have passed a corner fold within the step."""
         hb, ev = self.hb, corr.ev
-        exact = beyond_corner
-        if not exact:
-            t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, self.t, self.ref_sign)
-            exact = sign == 0 and t @ self.t < SHARP_TURN
+        prev = self.t_beyond if beyond_corner else self.t
+        t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, prev, self.ref_sign)
+        exact = sign == 0 and t @ prev < SHARP_TURN
+        if sign == 0 and not exact:
+            sign = self.ref_sign
         if exact:
             self._exact_reference()           # at the previous point, so before moving on
-            t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, self.t, self.ref_sign, exact_sign=True)
-        # the reference of the next orientation is this point's sign (0 after a GMRES solve)
+            t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, prev, self.ref_sign, exact_sign=True)
+        # the reference of the next orientation: this point's sign, found or carried
         self.U, self.w, self.t, self.ref_sign = corr.U, corr.w, t, sign
         self.sols.append(hb.make_solution(self.w, self.force, self.U, float(np.linalg.norm(ev.R) / ev.scale),
                                           corr.it, ev.nl.size, g=ev.g,

@@ -57,9 +57,23 @@ def _double(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, int]:
     return X, _sign(lu, piv)
 
 
+def lu_solve(A: np.ndarray, B: np.ndarray, stats: dict | None = None) -> np.ndarray:
+    """Solve A X = B by LU when the determinant's sign is not needed (a float64 A).
+
+    Above :data:`MIXED_SIZE` the single-precision factors are kept whatever rcond, as long as
+    the refinement reaches double precision (the stopping test of ``dsgesv``); only a stall
+    factorizes in double. The sign certificate of :func:`lu_solve_sign` sent the stiff layer
+    joint's Newton systems (rcond below 2e-6) to a second, double-precision LU although their
+    refinement converged: 7 of 14 on its backbone (default model), about 5 s each.
+
+    Args and Returns: as :func:`lu_solve_sign`, without the sign.
+    """
+    return lu_solve_sign(A, B, stats, certify=False)[0]
+
+
 def lu_solve_sign(A: np.ndarray, B: np.ndarray, stats: dict | None = None,
                   matvec: Callable | None = None,
-                  rebuild: Callable | None = None) -> tuple[np.ndarray, int]:
+                  rebuild: Callable | None = None, certify: bool = True) -> tuple[np.ndarray, int]:
     """Solve A X = B by LU and return the sign of det A.
 
     Args:
@@ -74,6 +88,8 @@ def lu_solve_sign(A: np.ndarray, B: np.ndarray, stats: dict | None = None,
         matvec: x (n,) -> A x in double precision (the refinement's residuals of a float32 A).
         rebuild: () -> A as float64 (C-ordered), for the double-precision factorization when a
             float32 A's sign is not certified or its refinement stalls.
+        certify: use single-precision factors only when their sign is certified (False: the
+            sign returned may be wrong, the solution is not; :func:`lu_solve`).
     Returns:
         (X with B's shape, sign of det A: +1 or -1, 0 if a pivot is exactly zero).
     """
@@ -83,7 +99,7 @@ def lu_solve_sign(A: np.ndarray, B: np.ndarray, stats: dict | None = None,
     if single and (matvec is None or rebuild is None):
         raise ValueError("a float32 matrix needs matvec and rebuild")
     if n >= MIXED_SIZE or single:
-        out = _mixed(A, B2, matvec if single else None)
+        out = _mixed(A, B2, matvec if single else None, certify)
         if out is not None:
             if stats is not None:
                 stats["lu_single"] = stats.get("lu_single", 0) + 1
@@ -96,10 +112,11 @@ def lu_solve_sign(A: np.ndarray, B: np.ndarray, stats: dict | None = None,
     return X.reshape(B.shape), sign
 
 
-def _mixed(A: np.ndarray, B: np.ndarray,
-           matvec: Callable | None = None) -> tuple[np.ndarray, int] | None:
+def _mixed(A: np.ndarray, B: np.ndarray, matvec: Callable | None = None,
+           certify: bool = True) -> tuple[np.ndarray, int] | None:
     """Single-precision LU of A (A^T, Fortran-ordered), refined in double precision; None when
-    the sign is not certified or the refinement stalls (the caller factorizes in double).
+    the sign is not certified (``certify``) or the refinement stalls (the caller factorizes in
+    double).
     A float32 A is factorized in place and the residuals come from ``matvec``; a float64 A is
     copied to single precision and kept for the residuals."""
     if A.dtype == np.float32:
@@ -120,7 +137,7 @@ def _mixed(A: np.ndarray, B: np.ndarray,
     if info != 0:
         return None                                    # exactly singular in single precision
     # rcond of A^T in the infinity norm is rcond of A in the 1-norm
-    rcond, _ = lapack.sgecon(lu, a1, norm="I")
+    rcond = lapack.sgecon(lu, a1, norm="I")[0] if certify else None
 
     def solve32(R: np.ndarray) -> np.ndarray:
         Y, _ = lapack.sgetrs(lu, piv, R.astype(np.float32), trans=1)
@@ -133,7 +150,7 @@ def _mixed(A: np.ndarray, B: np.ndarray,
         # normwise backward error per column, infinity norm for the stopping test (as dsgesv)
         if it == 0:
             eta = float(np.max(np.abs(R).sum(axis=0) / (a1 * np.abs(X).sum(axis=0) + b1)))
-            if not rcond > SIGN_MARGIN * max(eta, _EPS32):
+            if certify and not rcond > SIGN_MARGIN * max(eta, _EPS32):
                 return None
         if np.all(np.abs(R).max(axis=0) <= np.sqrt(A.shape[0]) * _EPS64 * ainf * np.abs(X).max(axis=0)):
             return X, _sign(lu, piv)

@@ -45,7 +45,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .continuation import ContinuationSettings, FRFResult, continue_frf
-from .dense import MIXED_SIZE, lu_solve_sign
+from .dense import MIXED_SIZE, lu_solve, lu_solve_sign
 from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 from .friction import FrictionContacts, once
@@ -472,7 +472,7 @@ class HarmonicBalance:
             except ConvergenceError:
                 J = self._dense_fallback(omega, nl, Dg)
         if J is not None:
-            X, _ = lu_solve_sign(J, B, self.stats)
+            X = lu_solve(J, B, self.stats)
         return [r - self._expand(omega, nl, cn, idx, Dg, X[:, i]) for i, r in enumerate(rhs)]
 
     def _dense_fallback(self, omega, nl, Dg, out=None):

@@ -61,6 +61,26 @@ def test_uncertified_sign_uses_double_precision() -> None:
     assert np.linalg.norm(A @ X - B) <= 1e-13 * np.linalg.norm(A, 2) * np.linalg.norm(X)
 
 
+def test_solve_without_sign_keeps_single_precision_factors() -> None:
+    """lu_solve, where no sign is needed: the condition-1e6 matrix whose sign is not certified
+    keeps its single-precision factors (the refinement converges, cond x eps_single = 0.06) and
+    the solution is the double-precision one; at condition 1e9 the refinement stalls and the
+    double LU solves it."""
+    n = dense.MIXED_SIZE + 3
+    rng = np.random.default_rng(5)
+    for cond, kind in ((1e6, "lu_single"), (1e9, "lu_double")):
+        sv = np.ones(n)
+        sv[-1] = 1.0 / cond
+        A = _matrix(n, rng, sv)
+        B = rng.normal(size=(n, 2))
+        st = {}
+        X = dense.lu_solve(A.copy(), B, st)
+        assert st == {kind: 1}
+        r = np.abs(B - A @ X).max(axis=0)
+        assert np.all(r <= np.sqrt(n) * np.finfo(float).eps * np.abs(A).sum(axis=1).max()
+                      * np.abs(X).max(axis=0))
+
+
 def test_sign_from_factors() -> None:
     """_sign: the product of the pivots' signs and of the row interchanges; 0 for a zero pivot."""
     lu = np.diag([2.0, -1.0, 3.0])
