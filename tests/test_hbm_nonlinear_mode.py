@@ -428,3 +428,30 @@ def test_backbone_steps_over_one_amplitude_where_newton_fails(monkeypatch):
     assert np.array_equal(bb.modal_amplitude, full.modal_amplitude[keep])
     assert np.allclose(bb.omega, full.omega[keep], rtol=1e-9)
     assert np.allclose(bb.xi, full.xi[keep], rtol=1e-7)
+
+
+def test_backbone_steps_over_a_kink_after_two_stalls(monkeypatch):
+    """Newton runs that stall near convergence (residual <= STALL_BELOW) at an output amplitude
+    and on the halved step towards it: the step over it comes after KINK_STALLS failed runs, not
+    after max_halvings; runs that fail far from convergence still halve max_halvings times."""
+    from hbm import nonlinear_mode as nm
+    from hbm.errors import ConvergenceError
+    hb = jenkins_1dof(1, 256)
+    full = hb.nonlinear_mode(0, (0.05, 20.0), dof=0, n_points=12)
+    bad = full.modal_amplitude[6]
+    lo = full.modal_amplitude[5] * (bad / full.modal_amplitude[5]) ** 0.5
+    solve = NonlinearModeProblem.solve
+    for residual, fails in ((3e-7, nm.KINK_STALLS), (1e-2, 8 + 1)):
+        failed = []
+
+        def kink(self, a, *args, **kw):
+            if lo < a <= bad:
+                failed.append(a)
+                raise ConvergenceError("test: a kink", residual)
+            return solve(self, a, *args, **kw)
+        monkeypatch.setattr(NonlinearModeProblem, "solve", kink)
+        bb = hb.nonlinear_mode(0, (0.05, 20.0), dof=0, n_points=12)
+        assert bb.complete and "skipped modal amplitude" in bb.stop_reason
+        # the whole step to the amplitude fails, the halved one reaches lo; from lo, ``fails``
+        # runs towards it fail before the step over it
+        assert len(failed) == 1 + fails and bb.modal_amplitude.size == full.modal_amplitude.size - 1
