@@ -496,8 +496,9 @@ def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40
     stuck mode, each next one from the secant through the last two points in log a (of U/a, w and
     xi). A failed Newton halves the step in log a (intermediate points are not reported), at most
     ``max_halvings`` times in a row (``KINK_STALLS`` times when Newton stalls near convergence);
-    then it tries once the whole step to the next output amplitude (a kink of the sampled friction law can sit right at one output amplitude: that
-    one is then missing, and ``stop_reason`` names it, ``complete`` stays True); if that fails
+    then it tries once the whole step to the next output amplitude (a kink of the sampled
+    friction law can sit right at one output amplitude: that one is then missing, and
+    ``stop_reason`` names it, ``complete`` stays True); if that fails
     too, the continuation raises ConvergenceError, or with ``partial`` returns the points reached
     so far (``complete`` False, at least two points).
 
