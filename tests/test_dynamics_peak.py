@@ -429,3 +429,63 @@ def test_smooth_peak_is_the_parabolas_vertex_from_any_start() -> None:
     f = np.array(found)
     assert np.ptp(f) / f_vertex < 1e-10, f / f_vertex - 1
     assert np.abs(f / f_vertex - 1).max() < 2e-8, f / f_vertex - 1
+
+
+def test_interpolated_starts_save_newton_iterations_for_the_same_peak(monkeypatch) -> None:
+    """The peak search's solves start from the contact harmonics interpolated between the
+    nearest solutions on either side: on the corner and the smooth peak of the one-element
+    model the search ends on the same peak as from the nearest solution (to 1e-12) with fewer
+    Newton iterations (counted as Jacobians)."""
+    from fe_joint.study import frf as F
+    for kt, level in ((2e4, 5.0), (2e3, 2.0)):
+        rm, joint = _two_grounded_masses(), _joint(kt)
+        ref, _ = _sweep(rm, joint, level)
+        got = {}
+        for interpolated in (False, True):
+            monkeypatch.setattr(F, "INTERPOLATED_START", interpolated)
+            hb, force = _peak_solver(rm, joint, level)
+            start = hb.solve(2 * np.pi * ref.peak_hz * (1 + 3e-5), force)
+            n0 = hb.stats["jacobians"]
+            peak = F._refine_peak(hb, force, 0, start)
+            got[interpolated] = (peak.omega, peak.amplitude(0), hb.stats["jacobians"] - n0)
+        (w0, x0, n_near), (w1, x1, n_interp) = got[False], got[True]
+        assert w1 == pytest.approx(w0, rel=1e-12) and x1 == pytest.approx(x0, rel=1e-12), kt
+        assert n_interp < 0.8 * n_near, (kt, n_interp, n_near)
+
+
+def test_a_top_the_sweep_stepped_over_is_resampled_not_traced(monkeypatch) -> None:
+    """Where the sweep's steps next to its largest point exceed PEAK_GAP, the two steps are
+    resampled by fixed-frequency solves (SCAN_SUBDIVISIONS per step, no continuation): the
+    peak equals the one found from the finely traced branch (the scan turned off) to 1e-9, no
+    branch is traced, and the resampled points are sorted and include the sweep's three."""
+    from fe_joint.study import frf as F
+    calls = {"local": 0, "scan": []}
+    local, scan = F._local_branch, F._scan_top
+
+    def counted_local(*a, **kw):
+        calls["local"] += 1
+        return local(*a, **kw)
+
+    def kept_scan(*a, **kw):
+        out = scan(*a, **kw)
+        calls["scan"].append((a[3], a[4], out))
+        return out
+    monkeypatch.setattr(F, "_local_branch", counted_local)
+    monkeypatch.setattr(F, "_scan_top", kept_scan)
+    rm = _two_grounded_masses()
+    for kt, level in ((2e4, 5.0), (2e3, 5.0)):
+        calls["local"], calls["scan"] = 0, []
+        cr, _ = _sweep(rm, _joint(kt), level)
+        [(res, k, out)] = calls["scan"]
+        assert out is not None and calls["local"] == 0, kt
+        branch, kb, _ = out
+        n = 2 * F.SCAN_SUBDIVISIONS + 1
+        assert len(branch.omega) == n and np.all(np.diff(branch.omega) > 0)
+        assert set(res.omega[k - 1:k + 2]) <= set(branch.omega)
+        assert branch.amplitude[kb] >= res.amplitude[k]
+        monkeypatch.setattr(F, "_scan_top", lambda *a, **kw: None)
+        traced, _ = _sweep(rm, _joint(kt), level)
+        monkeypatch.setattr(F, "_scan_top", kept_scan)
+        assert calls["local"] == 1, kt
+        assert cr.peak_hz == pytest.approx(traced.peak_hz, rel=1e-9), kt
+        assert cr.peak_amplitude == pytest.approx(traced.peak_amplitude, rel=1e-9), kt

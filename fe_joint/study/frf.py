@@ -206,13 +206,18 @@ def _sweep(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSet
     branch, kb, its = res, k, 0
     gap = max(abs(res.omega[k + 1] - res.omega[k]), abs(res.omega[k] - res.omega[k - 1]))
     if gap > PEAK_GAP * res.omega[k]:
-        # the sweep stepped over the top (its steps may be 1/50 of the band): trace it again
-        # finely from the largest point, so that the peak search starts next to the maximum
-        try:
-            branch, kb, its = _local_branch(hb, force, rm.response_dof, float(res.omega[k]),
-                                            res.solutions[k])
-        except ConvergenceError:
-            branch, kb, its = res, k, 0
+        # the sweep stepped over the top (its steps may be 1/50 of the band): resample its two
+        # steps next to the largest point, or where that cannot be done trace the branch again
+        # finely from there, so that the peak search starts next to the maximum
+        fine = _scan_top(hb, force, rm.response_dof, res, k)
+        if fine is not None:
+            branch, kb, its = fine
+        else:
+            try:
+                branch, kb, its = _local_branch(hb, force, rm.response_dof, float(res.omega[k]),
+                                                res.solutions[k])
+            except ConvergenceError:
+                branch, kb, its = res, k, 0
     peak_sol = _refine_peak(hb, force, rm.response_dof,
                             _polish_peak(hb, force, rm.response_dof, branch, kb))
     cr = _curve_result(hb, rm, joint, level, act, peak_sol, res.omega, res.amplitude,
@@ -230,12 +235,18 @@ def _full_contact(joint: JointModel, act: np.ndarray, sol) -> np.ndarray:
 PEAK_WINDOW = 0.03
 #: relative fall of the amplitude beyond a maximum that ends the local search
 PEAK_DROP = 0.01
-#: a sweep whose largest point is farther than this (relative) from a neighbour is traced again
-#: finely around it before the peak search (the top-level sweeps step over their tops: the quick
-#: model's v3-rq10 at the top level went from 241.35 to 241.77 Hz over a peak at 241.51 Hz, and
-#: the peak search from there, through a bracket grown to 1.7e-3, ended 3.4e-5 apart on 1 and 2
-#: ranks)
+#: a sweep whose largest point is farther than this (relative) from a neighbour is resampled
+#: around it (``_scan_top``), or traced again finely (``_local_branch``) where its frequency is
+#: not monotone there, before the peak search. Without either, the quick model's v3-rq10 at the
+#: top level went from 241.35 to 241.77 Hz over a peak at 241.51 Hz, and the peak search from
+#: there, through a bracket grown to 1.7e-3, ended 3.4e-5 apart on 1 and 2 ranks; the small
+#: case's baseline at the top level (tests/test_workflow.py) found a bump 2.5e-4 away and 3e-3
+#: lower than its sharp top. Tracing cost 2-4 s at the default model's middle level and 10-32 s
+#: at its top (its steps cross corner folds, each oriented by a dense LU); the resampling
+#: 0.2-3 s for the same peaks (issue 16, session 10).
 PEAK_GAP = 2e-4
+#: a top the sweep stepped over is resampled with this many sub-steps per step (``_scan_top``)
+SCAN_SUBDIVISIONS = 4
 
 
 def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.ndarray,
@@ -284,6 +295,48 @@ def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.nda
     cr = _curve_result(hb, rm, joint, level, act, peak_sol, omega[order], amp[order],
                        np.ones(len(omega), bool), its, t0)
     return cr, _full_contact(joint, act, peak_sol)
+
+
+def _scan_top(hb, force: np.ndarray, dof: int, res, k: int, n: int | None = None):
+    """The sweep's top resampled at fixed frequencies: ``n - 1`` (``SCAN_SUBDIVISIONS``) evenly
+    spaced inside each of the two steps next to the largest point k, each solve started from the
+    contact harmonics interpolated between the step's ends.
+
+    Only where the branch is a function of ω there: the frequencies of points k - 1, k, k + 1
+    strictly monotone (no turning point between them). Fixed-frequency solves need no tangent
+    and no bordered system, so no dense LU at the corner folds that a traced branch
+    (:func:`_local_branch`) orients by one.
+
+    Returns:
+        (branch with omega, amplitude, solutions sorted by ω; index of its largest point;
+        Newton iterations), or None where ω is not monotone or a solve fails (then the caller
+        traces the branch).
+    """
+    n = SCAN_SUBDIVISIONS if n is None else n
+    ends = (k - 1, k, k + 1)
+    w = [float(res.omega[i]) for i in ends]
+    if not (w[0] < w[1] < w[2] or w[0] > w[1] > w[2]):
+        return None
+    pts = {w[j]: res.solutions[i] for j, i in enumerate(ends)}
+    its = 0
+    for a, b in ((k - 1, k), (k, k + 1)):
+        wa, wb = float(res.omega[a]), float(res.omega[b])
+        step = {wa: res.solutions[a], wb: res.solutions[b]}
+        for j in range(1, n):
+            wj = wa + (wb - wa) * j / n
+            try:
+                sol = hb.solve(wj, force, guess=_interpolated_start(wj, step, res.solutions[a]))
+            except ConvergenceError:
+                return None
+            its += sol.iterations
+            pts[wj] = sol
+    omega = np.array(sorted(pts))
+    sols = [pts[x] for x in omega]
+    amp = np.array([x.amplitude(dof) for x in sols])
+    kk = int(np.argmax(amp))
+    if not 0 < kk < len(omega) - 1:
+        return None
+    return SimpleNamespace(omega=omega, amplitude=amp, solutions=sols), kk, its
 
 
 def _local_branch(hb, force: np.ndarray, dof: int, w: float, start, max_points: int = 80):
@@ -364,6 +417,18 @@ def _curve_result(hb, rm, joint, level, act, peak_sol, omega, amplitude, stable,
         n_active=len(act), n_nonlinear=int(np.sum(er.status > 0)))
 
 
+def _interpolated_start(w: float, known: dict, fallback):
+    """The warm start of a solve at ω = w (rad/s): the contact harmonics interpolated linearly
+    between the solutions of ``known`` (ω -> Solution) nearest to w on either side, or
+    ``fallback`` where w is not between two of them (or ``INTERPOLATED_START`` is off)."""
+    lo = max((x for x in known if x < w), default=None)
+    hi = min((x for x in known if x > w), default=None)
+    if not INTERPOLATED_START or lo is None or hi is None:
+        return fallback
+    a = (w - lo) / (hi - lo)
+    return SimpleNamespace(contact=(1 - a) * known[lo].contact + a * known[hi].contact)
+
+
 def _polish_peak(hb, force: np.ndarray, dof: int, res, k: int, iterations: int = 6,
                  rtol: float = 1e-6):
     """The resonance peak to solver precision: successive parabolic interpolation on the branch.
@@ -388,7 +453,8 @@ def _polish_peak(hb, force: np.ndarray, dof: int, res, k: int, iterations: int =
         xv = x1 - 0.5 * ((x1 - x0) ** 2 * (y1 - y2) - (x1 - x2) ** 2 * (y1 - y0)) / den
         if not (x0 < xv < x2) or abs(xv - best[0]) <= rtol * best[0]:
             break
-        guess = min(pts, key=lambda p: abs(p[0] - xv))[2]
+        guess = _interpolated_start(xv, {p[0]: p[2] for p in pts},
+                                    min(pts, key=lambda p: abs(p[0] - xv))[2])
         try:
             sol = hb.solve(xv, force, guess=guess)
         except ConvergenceError:
@@ -421,6 +487,12 @@ PEAK_TOLERANCES = (1e-12, 1e-11)
 PEAK_STENCIL = 1e-5
 #: Peak search: a vertex at most this much below the golden section's maximum (relative) is taken
 PEAK_SMOOTH = 1e-10
+#: Peak polish and search: start each solve from the contact harmonics interpolated between the
+#: nearest solutions on either side (``_interpolated_start``). Its error is second order in their
+#: spacing, the nearest solution's first order: at the tight tolerances Newton needs fewer
+#: iterations (default model, one process each: the search's seconds 5.2 → 3.6 (v2@L2), 6.1 →
+#: 3.8 (baseline@L1), 8.6 → 6.1 (v1@L1), 5.8 → 3.9 (smooth-ms@L1), the same peaks to 1e-12)
+INTERPOLATED_START = True
 #: the golden section's interior ratio, (3 − √5)/2
 _GOLD = 0.3819660112501051
 #: the golden ratio, the growth of the bracket
@@ -442,8 +514,9 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, max_solves: int = 80):
     failed (below the fold under a softening peak) and returned the point it stood on: two
     models 1e-10 apart gave v2's top-level peak 2.1e-5 apart in frequency and 1.2e-4 in amplitude.
 
-    Every solve starts from the best solution so far, so the search stays on the branch of the
-    peak; one that fails at the tight tolerances is repeated at hbm's strict and then at the
+    Every solve starts from the solutions next to it, interpolated (``INTERPOLATED_START``), or
+    where it is not between two from the best solution so far, so the search stays on the branch
+    of the peak; one that fails at the tight tolerances is repeated at hbm's strict and then at the
     sweep's tolerances, and from a looser solution once more at the tight ones (when that fails
     too, the looser amplitude is used: at 1e-9 it may be off by ≈ 2.5e-8 on the resonator). A
     failed solve's best iterate (Newton stops on a stall, ``HarmonicBalance.newton``) that meets
@@ -474,9 +547,14 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, max_solves: int = 80):
         except ConvergenceError as e:
             return None, e.best
 
-    def amp(w: float, guess):
-        """(X, Solution) at w, or (-inf, None) when no solve converges."""
+    solved = {}      # ω -> Solution of every converged solve, for the warm starts
+
+    def amp(w: float, guess, interpolate: bool = True):
+        """(X, Solution) at w, or (-inf, None) when no solve converges; from ``guess`` itself
+        unless ``interpolate`` (and two solutions straddle w)."""
         count[0] += 1
+        if interpolate:
+            guess = _interpolated_start(w, solved, guess)
         s, best = attempt(w, guess, PEAK_TOLERANCES)
         if s is None and best is not None and best.residual <= ladder[-1][0]:
             # Newton stalled (a kink of the sampled friction law) at an iterate that meets a
@@ -498,7 +576,10 @@ def _refine_peak(hb, force: np.ndarray, dof: int, sol, max_solves: int = 80):
                 s = attempt(w, s, PEAK_TOLERANCES)[0] or s
             elif best is not None and best.residual <= ladder[-1][0]:
                 s = best
-        return (-np.inf, None) if s is None else (s.amplitude(dof), s)
+        if s is None:
+            return -np.inf, None
+        solved[w] = s
+        return s.amplitude(dof), s
 
     try:
         wm = float(sol.omega)
@@ -559,7 +640,10 @@ def _smooth_vertex(amp, wm: float, xm: float, sm):
     1.2e-6 off and 2.4e-7 below, so the golden section's maximum is kept).
     """
     h = PEAK_STENCIL * wm
-    (xl, sl), (xr, sr) = amp(wm - h, sm), amp(wm + h, sm)
+    # the stencil's solves from one start: their amplitudes' errors then nearly cancel in the
+    # vertex (from interpolated starts the vertex of the one-element test's smooth top moved by
+    # 1.3e-10 between starts of the search; from sm by 5e-13)
+    (xl, sl), (xr, sr) = amp(wm - h, sm, False), amp(wm + h, sm, False)
     curv = xl - 2 * xm + xr
     if not (curv < 0 and np.isfinite(xl) and np.isfinite(xr)):
         return sm
