@@ -367,3 +367,15 @@ def test_one_blas_thread_unless_the_user_sets_it() -> None:
     env["OPENBLAS_NUM_THREADS"] = "2"
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["2", "1"]
+
+
+def test_run_script_counts_cores_without_omp_num_threads() -> None:
+    """scripts/run's default rank count is the cores this process may use, also when
+    OMP_NUM_THREADS=1 is exported (GNU nproc reports that variable instead: a one-rank run)."""
+    line = next(x for x in (Path(__file__).parents[1] / "scripts" / "run").read_text().splitlines()
+                if x.startswith("np="))
+    env = {k: v for k, v in os.environ.items() if k != "FE_JOINT_NP"}
+    env["OMP_NUM_THREADS"] = "1"
+    out = subprocess.run(["bash", "-c", f'{line}\necho "$np"'], env=env, capture_output=True,
+                         text=True, check=True).stdout
+    assert int(out) == len(os.sched_getaffinity(0))
