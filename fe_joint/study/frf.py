@@ -243,7 +243,7 @@ PEAK_DROP = 0.01
 #: case's baseline at the top level (tests/test_workflow.py) found a bump 2.5e-4 away and 3e-3
 #: lower than its sharp top. Tracing cost 2-4 s at the default model's middle level and 10-32 s
 #: at its top (its steps cross corner folds, each oriented by a dense LU); the resampling
-#: 0.2-3 s for the same peaks (issue 16, session 10).
+#: 0.2-4 s for the same peaks (issue 16, session 10).
 PEAK_GAP = 2e-4
 #: a top the sweep stepped over is resampled with this many sub-steps per step (``_scan_top``)
 SCAN_SUBDIVISIONS = 4
@@ -298,9 +298,9 @@ def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.nda
 
 
 def _scan_top(hb, force: np.ndarray, dof: int, res, k: int, n: int | None = None):
-    """The sweep's top resampled at fixed frequencies: ``n - 1`` (``SCAN_SUBDIVISIONS``) evenly
-    spaced inside each of the two steps next to the largest point k, each solve started from the
-    contact harmonics interpolated between the step's ends.
+    """The sweep's top resampled at fixed frequencies: ``n - 1`` evenly spaced inside each of the
+    two steps next to the largest point k (n = ``SCAN_SUBDIVISIONS`` unless given), each solve
+    started from the contact harmonics interpolated between the step's ends.
 
     Only where the branch is a function of ω there: the frequencies of points k - 1, k, k + 1
     strictly monotone (no turning point between them). Fixed-frequency solves need no tangent
