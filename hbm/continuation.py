@@ -53,6 +53,9 @@ from . import stability as stab
 #: accepted values of ``ContinuationSettings.stability``
 STABILITY_METHODS = ("auto", "hill", "fold", "none")
 
+#: GMRES tolerance of a tangent's bordered solve (right-hand side of norm 1): a direction for
+#: the predictor, whose error is the step's curvature (1e-3 or so of ds), not 1e-8
+TANGENT_TOL = 1e-6
 #: t . t_prev below which a tangent found by GMRES (no determinant sign) is oriented again with
 #: exact signs: the turn may be a corner fold. The tangent flips met at points reached without a
 #: corner restart in small friction problems had |t . t_prev| of 0.75-0.85 (cos 25.8 deg = 0.9).
@@ -257,7 +260,7 @@ def _tangent(hb, force: np.ndarray, sc: _Scaling, w: float, ev: _Eval, prev: np.
     Rw = hb.r_omega(w, force, ev.g)
     tU, tw = sc.border(prev)
     [(dU, dw)], sign = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(np.zeros(sc.shape), -1.0)],
-                                       exact_sign=exact_sign)
+                                       exact_sign=exact_sign, atol=[TANGENT_TOL])
     t = sc.Y(dU, dw)
     t /= np.linalg.norm(t)
     if ref_sign and sign and sign != ref_sign:
@@ -321,7 +324,9 @@ def _correct(hb, force: np.ndarray, sc: _Scaling, Yp: np.ndarray, t: np.ndarray,
         Rw = hb.r_omega(w, force, ev.g)
         cval = t @ (sc.Y(U, w) - Yp)
         tU, tw = sc.border(t)
-        [(dU, dw)], _ = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(ev.R, cval)])
+        # the step's linear residual need not be below a tenth of the tolerance (inexact Newton)
+        [(dU, dw)], _ = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(ev.R, cval)],
+                                        atol=[hb.step_atol(ev.scale)])
         alpha, Ut, wt, evt, decreased = _line_search(hb, force, U, w, dU, dw, r)
         if wt <= 0 or evt is None:
             return _Correction(False, U, w, ev, it)

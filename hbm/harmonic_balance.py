@@ -41,6 +41,7 @@ from typing import Callable
 
 import numpy as np
 import scipy.linalg as sla
+from numpy.lib.stride_tricks import as_strided
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -171,6 +172,18 @@ STALL_LINE_SEARCHES = 3
 #: the sampled friction law; far from the solution damped Newton may crawl before it converges
 #: (the friction demo's oscillator: 3 failed line searches at 0.68, then converged)
 STALL_BELOW = 1e-5
+
+
+#: a Newton step's GMRES stops once its linear residual is below this fraction of the Newton
+#: tolerance's absolute residual (tol x scale), not at ``krylov_tol`` relative to the right-hand
+#: side: after the step the residual is that linear residual plus the step's quadratic error, so
+#: solving further buys nothing (the "forcing term" of inexact Newton, Eisenstat & Walker 1996;
+#: Kelley 2003, ch. 3). The first corrector step from a residual of 1e-3 then stops at 1e-5
+#: relative instead of 1e-8, the last one at 1e-2 or so. Never looser than ``krylov_tol``
+#: relative when the right-hand side is large, never looser than KRYLOV_ETA_MAX when it is small
+#: (a residual just above the tolerance still gets a step that clears it).
+KRYLOV_FORCING = 0.1
+KRYLOV_ETA_MAX = 1e-2
 
 
 #: after GMRES failed on two reduced systems in a row (its restarts exhausted, then the dense
@@ -401,10 +414,12 @@ class HarmonicBalance:
                 for c, Gm in terms:       # Gm times blockdiag_e(D5[e, :, c, :, :]): (k, p, 3 n_H)
                     acc = acc + np.matmul(Gm.reshape(p, k, 3).transpose(1, 0, 2),
                                           D5[:, :, c, :, :].reshape(k, 3, 3 * nH))
-                acc = acc.reshape(k, p, 3, nH)
-                for col in range(nH):     # column col p + 3e + d of row block r
-                    J[r * p:(r + 1) * p, col * p:(col + 1) * p] = (
-                        acc[:, :, :, col].transpose(1, 0, 2).reshape(p, p))
+                # entry (e, i, d, col) is J[r p + i, col p + 3e + d]: one strided copy into a
+                # view of J in acc's layout (a copy per column block took 4 times as long)
+                s0, s1 = J.strides
+                view = as_strided(J[r * p:(r + 1) * p], shape=(k, p, 3, nH),
+                                  strides=(3 * s1, s0, s1, p * s1))
+                view[...] = acc.reshape(k, p, 3, nH)
         J[np.diag_indices(P)] += 1.0
         return J
 
@@ -433,7 +448,18 @@ class HarmonicBalance:
         gfull[:, cn] = self.from_contact(ge.reshape(k, 3, nH))
         return self.gapply(omega, gfull)
 
-    def _krylov(self, matvec, prec, B, P):
+    def krylov_rtol(self, b_norm: float, atol: float | None) -> float:
+        """GMRES tolerance relative to ||b|| for a right-hand side of norm ``b_norm``.
+
+        ``atol`` None: ``krylov_tol``. Else the Newton step's linear residual only has to stay
+        below ``atol`` (see :data:`KRYLOV_FORCING`): the relative tolerance is atol / ||b||, at
+        least ``krylov_tol`` and at most :data:`KRYLOV_ETA_MAX`.
+        """
+        if atol is None or not atol > 0 or not b_norm > 0:
+            return self.krylov_tol
+        return float(min(max(self.krylov_tol, atol / b_norm), KRYLOV_ETA_MAX))
+
+    def _krylov(self, matvec, prec, B, P, atol=None):
         Aop = spla.LinearOperator((P, P), matvec=matvec)
         Mop = spla.LinearOperator((P, P), matvec=prec)
         X = np.empty_like(B)
@@ -443,13 +469,15 @@ class HarmonicBalance:
 
             def cb(_):
                 it[0] += 1
-            x, info = spla.gmres(Aop, B[:, i], M=Mop, tol=self.krylov_tol, atol=0.0, restart=150,
+            bn = float(np.linalg.norm(B[:, i]))
+            rtol = self.krylov_rtol(bn, None if atol is None else atol[i])
+            x, info = spla.gmres(Aop, B[:, i], M=Mop, tol=rtol, atol=0.0, restart=150,
                                  maxiter=4, callback=cb, callback_type="pr_norm")
             self.stats["gmres_iterations"] += it[0]
             most = max(most, it[0])
             if info != 0:
-                res = np.linalg.norm(matvec(x) - B[:, i]) / max(np.linalg.norm(B[:, i]), 1e-300)
-                if not np.isfinite(res) or res > 1e-7:
+                res = np.linalg.norm(matvec(x) - B[:, i]) / max(bn, 1e-300)
+                if not np.isfinite(res) or res > max(1e-7, rtol):
                     if self._pre is not None:
                         self._pre.worn = True      # a fresh one at the next solve
                     raise ConvergenceError("GMRES did not converge on the reduced Newton system", res)
@@ -459,8 +487,14 @@ class HarmonicBalance:
         self._gmres_failed = False
         return X
 
-    def linsolve(self, omega: float, nl: np.ndarray, Dg, rhs: list[np.ndarray]) -> list[np.ndarray]:
-        """Solve J x = rhs (each (n_H, n_c)) with J = I + G dg/dU, reduced on the nonlinear elements."""
+    def linsolve(self, omega: float, nl: np.ndarray, Dg, rhs: list[np.ndarray],
+                 atol: list | None = None) -> list[np.ndarray]:
+        """Solve J x = rhs (each (n_H, n_c)) with J = I + G dg/dU, reduced on the nonlinear elements.
+
+        Args:
+            atol: per right-hand side, the linear residual a Newton step needs (None: none,
+                ``krylov_tol`` relative; see :meth:`krylov_rtol`); GMRES path only.
+        """
         self.stats["linear_solves"] += 1
         if nl.size == 0:
             return [r.copy() for r in rhs]
@@ -468,7 +502,7 @@ class HarmonicBalance:
         B = np.stack([r[:, cn].ravel() for r in rhs], axis=1)   # (P, nrhs) reduced layout
         if J is None:
             try:
-                X = self._krylov(matvec, prec, B, B.shape[0])
+                X = self._krylov(matvec, prec, B, B.shape[0], atol)
             except ConvergenceError:
                 J = self._dense_fallback(omega, nl, Dg)
         if J is not None:
@@ -496,7 +530,8 @@ class HarmonicBalance:
             return True
         return False
 
-    def linsolve_aug(self, omega, nl, Dg, Rw, tU, tw, rhs, exact_sign: bool = False):
+    def linsolve_aug(self, omega, nl, Dg, Rw, tU, tw, rhs, exact_sign: bool = False,
+                     atol: list | None = None):
         """Bordered Newton solves of pseudo-arc-length continuation (nonsingular at folds).
 
         Solves [[J, Rw], [tU^T, tw]] [dU; dw] = [-R; -c] for each (R, c) in ``rhs`` (tU, tw
@@ -507,6 +542,8 @@ class HarmonicBalance:
             exact_sign: factorize the bordered system by LU even above ``dense_limit``, so that
                 the sign of its determinant is known (the continuation asks for it at corner
                 folds only; counted in ``stats["sign_factorizations"]``).
+            atol: per right-hand side, the linear residual a corrector step needs (None:
+                ``krylov_tol`` relative; see :meth:`krylov_rtol`); GMRES path only.
 
         Returns:
             list of (dU (n_H, n_c), dw), and the sign of the bordered determinant (0 if unknown,
@@ -544,7 +581,7 @@ class HarmonicBalance:
             def pc(z):
                 return np.concatenate([prec(z[:P]), [z[P] / beta if beta != 0 else z[P]]])
             try:
-                Z = self._krylov(mv, pc, Bm, P + 1)
+                Z = self._krylov(mv, pc, Bm, P + 1, atol)
                 sign = 0
             except ConvergenceError:
                 J = self._dense_fallback(omega, nl, Dg, out=A[:P, :P])
@@ -627,6 +664,11 @@ class HarmonicBalance:
     def _scale(self, U, Ul):
         return max(np.linalg.norm(U), np.linalg.norm(Ul), 1e-300)
 
+    def step_atol(self, scale: float) -> float:
+        """The linear residual a Newton step needs at response norm ``scale`` (the norm its
+        convergence test multiplies ``tol`` by), absolute (:data:`KRYLOV_FORCING`)."""
+        return KRYLOV_FORCING * self.tol * scale
+
     def converged(self, r: float, scale: float, step: float) -> bool:
         """Convergence test: ||R|| <= tol * scale, or (at a kink of the nonsmooth contact law,
         where Newton can stagnate) ||R|| <= 10 tol * scale with a last step below 10 tol * scale."""
@@ -688,7 +730,7 @@ class HarmonicBalance:
                     f"Newton stalled at omega = {omega:.6g} rad/s: the residual did not halve in "
                     f"{it - 1 - mark[1]} iterations ({no_descent} line searches in a row without "
                     "descent)", best[0], self._best(omega, force, best))
-            (dU,) = self.linsolve(omega, nl, Dg, [-R])
+            (dU,) = self.linsolve(omega, nl, Dg, [-R], atol=[self.step_atol(self._scale(U, Ul))])
             alpha, trial = self._line_search(omega, Ul, U, dU, r)
             if trial is None:
                 raise ConvergenceError(f"Newton at omega = {omega:.6g} rad/s: the friction march "

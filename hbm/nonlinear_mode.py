@@ -57,7 +57,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import ConvergenceError, CycleNotClosed
-from .harmonic_balance import STALL_BELOW, STALL_ITERATIONS, Solution
+from .harmonic_balance import KRYLOV_FORCING, STALL_BELOW, STALL_ITERATIONS, Solution
 from .structure import Receptance
 
 
@@ -421,7 +421,10 @@ class NonlinearModeProblem:
             if it == self.max_iter:
                 break
             (dRw, dSw), (dRx, dSx) = self._param_derivs(g, w, xi, a)
-            X0, Xw, Xx = self.ep.linsolve(w, nl, Dg, [-R, -dRw, -dRx])
+            # the residual's solve only to what the step needs (inexact Newton,
+            # harmonic_balance.KRYLOV_FORCING); the derivatives' to krylov_tol
+            X0, Xw, Xx = self.ep.linsolve(w, nl, Dg, [-R, -dRw, -dRx],
+                                          atol=[KRYLOV_FORCING * self.tol * sU, None, None])
             cw = self._row(self._dg(nl, Dg, Xw), a) + dSw
             cx = self._row(self._dg(nl, Dg, Xx), a) + dSx
             b = -r - self._row(self._dg(nl, Dg, X0), a)

@@ -204,7 +204,7 @@ def test_newton_stops_on_a_stall_and_gives_its_best_iterate(monkeypatch, scale):
     U0 = sol.contact * (1 + 1e-7)
     hb.tol = 1e-15                               # unreachable: only a stall ends it
     linsolve = hb.linsolve
-    monkeypatch.setattr(hb, "linsolve", lambda *a: [scale * x for x in linsolve(*a)])
+    monkeypatch.setattr(hb, "linsolve", lambda *a, **k: [scale * x for x in linsolve(*a, **k)])
     before = hb.stats["residuals"]
     with pytest.raises(ConvergenceError, match="stalled") as e:
         hb.solve(8.0, 5.0 * F, guess=SimpleNamespace(contact=U0))

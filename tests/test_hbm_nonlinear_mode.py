@@ -380,7 +380,7 @@ def test_epmc_newton_stops_on_a_stall_near_the_solution(monkeypatch):
     U, w, xi, phi, *_ = prob.solve(a, U, w, xi)
     assert phi <= 1e-11
     linsolve = prob.ep.linsolve
-    monkeypatch.setattr(prob.ep, "linsolve", lambda *x: [0.03 * v for v in linsolve(*x)])
+    monkeypatch.setattr(prob.ep, "linsolve", lambda *x, **k: [0.03 * v for v in linsolve(*x, **k)])
     merits = []
     merit = prob._merit
 
