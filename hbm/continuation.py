@@ -27,10 +27,6 @@
   and per sharp turn; smooth GMRES stretches need none. (Session 9: the carried signs equalled
   freshly computed ones at all 28 corners of the default model's four top-level sweeps, and the
   sweeps were point for point those of the former rule, which took three LUs per corner.)
-  Session 11: on the GMRES path the restart is tried both ways first and the LU taken only
-  for a restart that converged (``LU_AFTER_RESTART``: the same restarts accepted, no LU where
-  neither way converges), and a point whose restart failed is not restarted again at the
-  halved steps (``RESTART_ONCE``).
 * Step length grows x1.5 after <= 3 corrector iterations, shrinks x0.7 after >= 7, halves on failure;
   ``ConvergenceError`` below ds_min. Turning points (sign changes of the w-component of the tangent)
   are listed in ``FRFResult.turning_points``.
@@ -57,18 +53,6 @@ from . import stability as stab
 #: accepted values of ``ContinuationSettings.stability``
 STABILITY_METHODS = ("auto", "hill", "fold", "none")
 
-#: from one point, after a corner restart that failed (its corrector did not converge, or it
-#: converged back next to the point), the halved steps are only corrected plainly (no restart,
-#: so no sign LU): on the default model's four top-level sweeps 15 of 16 restarts failed, in
-#: chains of four along the halvings from one point (ds 0.1 … 0.0125, each after a
-#: 7413-unknown LU of 3.4 s) before a plain step of 0.006 passed; the one that succeeded was
-#: the first of its point, as were all 4 of the inclined contact's
-#: (``tests/test_hbm_continuation.py``). A restart that moved on but was refused by the step
-#: bounds is tried again at the shorter step.
-RESTART_ONCE = True
-#: on the GMRES path, a corner restart is tried along both orientations first and its dense LU
-#: taken only for one that converged (``_Branch._restart_then_orient``)
-LU_AFTER_RESTART = True
 #: t . t_prev below which a tangent found by GMRES (no determinant sign) is oriented again with
 #: exact signs: the turn may be a corner fold. The tangent flips met at points reached without a
 #: corner restart in small friction problems had |t . t_prev| of 0.75-0.85 (cos 25.8 deg = 0.9).
@@ -272,9 +256,6 @@ def _tangent(hb, force: np.ndarray, sc: _Scaling, w: float, ev: _Eval, prev: np.
     """
     Rw = hb.r_omega(w, force, ev.g)
     tU, tw = sc.border(prev)
-    # the tangent at krylov_tol: its bordered system has rcond down to 1e-5, so a looser
-    # residual (1e-6 was tried, sessions 8 and 11) is not a direction that accurate, and the
-    # sharp-turn test then asks for more sign LUs (baseline@L1 0 -> 2, smooth-ms@L1 0 -> 3)
     [(dU, dw)], sign = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(np.zeros(sc.shape), -1.0)],
                                        exact_sign=exact_sign)
     t = sc.Y(dU, dw)
@@ -340,7 +321,8 @@ def _correct(hb, force: np.ndarray, sc: _Scaling, Yp: np.ndarray, t: np.ndarray,
         Rw = hb.r_omega(w, force, ev.g)
         cval = t @ (sc.Y(U, w) - Yp)
         tU, tw = sc.border(t)
-        # the step's linear residual need not be below a tenth of the tolerance (inexact Newton)
+        # the step's linear residual need not be below a tenth of the tolerance (inexact Newton,
+        # harmonic_balance.KRYLOV_FORCING); the tangent (``_tangent``) stays at krylov_tol
         [(dU, dw)], _ = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(ev.R, cval)],
                                         atol=[hb.step_atol(ev.scale)])
         alpha, Ut, wt, evt, decreased = _line_search(hb, force, U, w, dU, dw, r)
@@ -456,16 +438,14 @@ class _Branch:
         s = self.settings
         Y = self.sc.Y(self.U, self.w)
         flipped = False
-        restart = True          # a corner restart that failed is not tried again from here
         while True:
             self.ds = _cap_step(self.ds, self.t, self.sc.ws, self.max_domega)
             Yp = Y + self.ds * self.t
             corr = _correct(self.hb, self.force, self.sc, Yp, self.t, s.max_corrector)
             self.total_it += corr.it
             plain, beyond = corr.ok, False
-            if not plain and corr.ev is not None and restart:   # None: the march did not close
+            if not plain and corr.ev is not None:     # None: the predictor's march did not close
                 corr, beyond = self._corner_restart(Y, Yp, corr)
-                restart = beyond or not RESTART_ONCE
             if (plain or beyond) and self._amplitude_step_ok(corr):
                 if flipped or not self._retraces(corr):
                     return corr, beyond
@@ -525,70 +505,22 @@ class _Branch:
         the hyperplane ahead. Take the tangent of the piece beyond the corner (Jacobian at the
         predictor Yp), orient it by the bordered-determinant sign, and restart the corrector from
         the corner (the failed corrector's last iterate) along it. The predictor's sign is exact
-        (its LU on the dense path; on the GMRES path a dense LU taken only once a restart has
-        converged, :meth:`_restart_then_orient`); the current point's is the sign carried along
-        the branch, computed only when none is known yet (``_exact_reference``). The oriented
-        tangent is kept as ``t_beyond``, the orientation of the point accepted beyond the corner.
+        (dense LU on the GMRES path); the current point's is the sign carried along the branch,
+        computed here only when none is known yet (``_exact_reference``). The oriented tangent is
+        kept as ``t_beyond``, the orientation of the point accepted beyond the corner.
 
         Returns:
             (the restart's _Correction, accepted?: converged and moved by > 1e-3 ds from Y).
         """
+        self._exact_reference()
         Up, wp = self.sc.unscale(Yp)
         evp = _evaluate(self.hb, self.force, Up, wp)
-        Yc = self.sc.Y(failed.U, failed.w)
-        tb, sign = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, None)
-        if sign == 0 and LU_AFTER_RESTART:
-            return self._restart_then_orient(Y, Yc, tb, wp, evp)
-        self._exact_reference()
-        if sign == 0:
-            tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign,
-                             exact_sign=True)
-        elif self.ref_sign and sign != self.ref_sign:
-            tb = -tb                                # as _tangent orients by ref_sign
+        tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign, exact_sign=True)
         self.t_beyond = tb
+        Yc = self.sc.Y(failed.U, failed.w)
         corr = _correct(self.hb, self.force, self.sc, Yc + self.ds * tb, tb, self.settings.max_corrector)
         self.total_it += corr.it
-        return corr, self._moved(corr, Y)
-
-    def _moved(self, corr: _Correction, Y: np.ndarray) -> bool:
-        """Converged, and by more than 1e-3 ds away from the current point Y."""
-        return bool(corr.ok and np.linalg.norm(self.sc.Y(corr.U, corr.w) - Y) > 1e-3 * self.ds)
-
-    def _restart_then_orient(self, Y: np.ndarray, Yc: np.ndarray, tb: np.ndarray, wp: float,
-                             evp: _Eval):
-        """The corner restart on the GMRES path, its dense LU only where it can matter.
-
-        ``tb`` is the GMRES tangent beyond the corner (t . tb > 0, no sign). The corrector is
-        restarted along tb, then along -tb; the first restart that converges and moves on gets
-        the predictor's exact sign (dense LU, as the dense path's rule), and is kept if that
-        orients tb its way, else only the other way is tried. The accepted restart is the one
-        the LU-first rule accepts; a corner where neither way converges costs no LU (on the
-        default model's top-level sweeps 15 of 16 restarts failed, each after a 7413-unknown
-        LU of 3.4 s).
-
-        Returns:
-            as :meth:`_corner_restart`.
-        """
-        known, corr = 0, None            # +1 / -1: the exact sign orients tb / -tb; 0: unknown
-        for tt, way in ((tb, 1), (-tb, -1)):
-            if known and known != way:
-                continue
-            corr = _correct(self.hb, self.force, self.sc, Yc + self.ds * tt, tt,
-                            self.settings.max_corrector)
-            self.total_it += corr.it
-            if not self._moved(corr, Y):
-                continue
-            if not known:
-                self._exact_reference()
-                te, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign,
-                                 exact_sign=True)
-                known = 1 if te @ tb > 0 else -1
-                if known != way:
-                    continue
-            self.t_beyond = tt
-            return corr, True
-        self.t_beyond = -tb if known < 0 else tb
-        return corr, False
+        return corr, bool(corr.ok and np.linalg.norm(self.sc.Y(corr.U, corr.w) - Y) > 1e-3 * self.ds)
 
     def _exact_reference(self) -> None:
         """Make ``ref_sign`` known at the current point when no sign has been computed on the

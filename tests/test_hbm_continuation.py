@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from hbm import (ContinuationSettings, ConvergenceError, CycleNotClosed, FrictionContacts, HarmonicBalance,
+from hbm import (ContinuationSettings, CycleNotClosed, FrictionContacts, HarmonicBalance,
                  LinearStructure)
 from hbm.reference import jenkins_frf_h1
 
@@ -216,16 +216,12 @@ def test_oriented_determinant_sign_is_a_branch_invariant(monkeypatch):
     assert 0 in signs and known["dense"] == known["gmres"]
 
 
-@pytest.mark.parametrize("lu_after", [True, False])
-def test_gmres_path_passes_corner_folds_like_the_dense_path(monkeypatch, lu_after):
+def test_gmres_path_passes_corner_folds_like_the_dense_path():
     """Mass on an inclined preloaded friction contact (tangential and normal gap both follow x),
     n_t = 32: the branch turns by more than 90 deg at corners of the sampled law (8 tangent
     flips, no fold in frequency). Every solve on the GMRES path, which has no determinant sign,
-    must give the dense path's branch: the corner signs are then taken from a dense LU, before
-    the restart or (``LU_AFTER_RESTART``) once a restart has converged. (With t . t_prev > 0
-    alone the branch went back the way it came and the step fell below ds_min.)"""
-    import hbm.continuation as cont
-    monkeypatch.setattr(cont, "LU_AFTER_RESTART", lu_after)
+    must give the dense path's branch: the corner signs are then taken from a dense LU. (With
+    t . t_prev > 0 alone the branch went back the way it came and the step fell below ds_min.)"""
     s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
     c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
     runs = {}
@@ -240,39 +236,6 @@ def test_gmres_path_passes_corner_folds_like_the_dense_path(monkeypatch, lu_afte
     # same points; at the corners near the peak the amplitude is sensitive (1e-6 apart there)
     assert len(a.omega) == len(b.omega) and np.max(np.abs(a.omega - b.omega)) <= 1e-6
     assert np.max(np.abs(a.amplitude - b.amplitude) / a.amplitude) <= 1e-5
-
-
-def test_a_corner_restart_that_fails_both_ways_costs_no_lu(monkeypatch):
-    """The inclined contact's branch on the GMRES path with every corner restart refused (as
-    most are on the default model's top-level sweeps): the restarts without their LUs
-    (``LU_AFTER_RESTART``) give the same points as with them, and one LU fewer per restart."""
-    import hbm.continuation as cont
-    monkeypatch.setattr(cont._Branch, "_moved", lambda self, corr, Y: False)
-    s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
-    c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
-    out = {}
-    for lu_after in (True, False):
-        monkeypatch.setattr(cont, "LU_AFTER_RESTART", lu_after)
-        restarts = []
-        restart = cont._Branch._corner_restart
-
-        def counted(self, Y, Yp, failed):
-            restarts.append(self.w)
-            return restart(self, Y, Yp, failed)
-        monkeypatch.setattr(cont._Branch, "_corner_restart", counted)
-        hb = ForcedPath(s, c, lambda w: True, harmonics=1, samples=32)
-        try:
-            frf = hb.frf(0.4, 2.5, np.array([0.4]), dof=0, stability="none")
-            pts = frf.omega
-        except ConvergenceError as e:
-            pts = e
-        out[lu_after] = (pts, len(restarts), hb.stats["sign_factorizations"])
-        monkeypatch.setattr(cont._Branch, "_corner_restart", restart)
-    (a, na, lua), (b, nb, lub) = out[True], out[False]
-    assert na == nb >= 2
-    assert str(a) == str(b) if isinstance(a, Exception) else np.array_equal(a, b)
-    assert lua + na <= lub
-    assert lua < lub
 
 
 def test_carried_sign_is_the_exact_sign_at_every_corner(monkeypatch):
