@@ -242,8 +242,10 @@ class HarmonicBalance:
         tol: Newton tolerance on ||R|| relative to the response norm.
         max_iter: Newton iteration limit.
         dense_limit: largest reduced system size factorized directly (else GMRES).
-        krylov_tol: relative GMRES tolerance of the reduced Newton systems (a Newton tolerance
-            of 1e-7 needs no more than 1e-8; 1e-11 keeps Newton quadratic down to 1e-9).
+        krylov_tol: relative GMRES tolerance of the reduced Newton systems, the tightest a
+            Newton step uses (it stops at the residual the step needs when that is looser,
+            :data:`KRYLOV_FORCING`; a Newton tolerance of 1e-7 needs no more than 1e-8; 1e-11
+            keeps Newton quadratic down to 1e-9).
         preconditioner: GMRES preconditioner, a key of ``preconditioner.PRECONDITIONERS``:
             "element" (the default, ``ElementBlockPreconditioner``), "averaged",
             "mean-coupled" or "two-level" (see the module ``preconditioner``).
