@@ -33,3 +33,49 @@ def test_preload_and_frequencies_independent_of_partition():
     # quick resonator; without the canonical sign M's coupling rows differ by O(1))
     assert np.abs(par.M - ser.M).max() <= 1e-9 * np.abs(ser.M).max()
     assert np.abs(par.C - ser.C).max() <= 1e-7 * np.abs(ser.C).max()
+
+
+@pytest.mark.mpi
+def test_column_split_condensation_equals_a_superlu_schur_complement():
+    """On several ranks each rank condenses a share of the boundary columns on its own serial
+    copy of K and M (``BoundaryCondensation._condense_split``): K_BB, M_BB and the modes'
+    coupling M_PB equal the Schur complement and the projected mass of a SuperLU factorization."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+    from petsc4py import PETSc
+
+    from fe_joint.fe.assembly import assemble_joint
+    from fe_joint.fe.condensation import BoundaryCondensation
+
+    comm = MPI.COMM_WORLD
+    data = build_box_joint(half=6.0, thickness=4.0, cell=2.0, shank_half=2.0, hole_half=4.0)
+    prob = assemble_joint(mesh_from_data(data, comm), Material())
+    b = prob.layout.dofs
+    n = prob.K.getSize()[0]
+    interior = np.setdiff1d(np.arange(n), b)
+    cond = BoundaryCondensation(prob.K, prob.M, b)
+    # two interior "modes", known functions of the global DOF number
+    modes = []
+    for k in range(2):
+        v = cond.KII.createVecRight()
+        lo, hi = v.getOwnershipRange()
+        v.getArray()[:] = np.sin(0.37 * interior[lo:hi] + k)
+        modes.append(v)
+    blocks = cond.condense(modes, chunk=100)
+    everything = PETSc.IS().createStride(n, 0, 1, comm=PETSc.COMM_SELF)
+
+    def scipy_copy(A):
+        ai, aj, av = A.createSubMatrices(everything)[0].getValuesCSR()
+        return sp.csr_matrix((av, aj, ai), shape=(n, n))
+    K, M = scipy_copy(prob.K), scipy_copy(prob.M)
+    lu = spla.splu(K[interior][:, interior].tocsc())
+    psi = -lu.solve(K[interior][:, b].toarray())
+    schur = K[b][:, b].toarray() + K[b][:, interior] @ psi
+    mi = M[interior][:, b].toarray() + M[interior][:, interior] @ psi
+    mr = M[b][:, b].toarray() + M[b][:, interior] @ psi + psi.T @ mi
+    phi = np.stack([np.sin(0.37 * interior + k) for k in range(2)], axis=1)
+    assert comm.size == 1 or cond.mpi.size > 1
+    assert np.abs(blocks["K_BB"] - schur).max() < 1e-9 * np.abs(schur).max()
+    assert np.abs(blocks["M_BB"] - mr).max() < 1e-9 * np.abs(mr).max()
+    assert np.abs(blocks["M_PB"] - phi.T @ mi).max() < 1e-9 * np.abs(phi.T @ mi).max()
+    cond.destroy()
