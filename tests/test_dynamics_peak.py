@@ -77,6 +77,27 @@ def test_local_peak_from_below_the_peak() -> None:
     assert loc.peak_hz == pytest.approx(ref.peak_hz, rel=2e-5)
 
 
+def test_pass0_peak_from_the_stuck_frequency_without_a_state() -> None:
+    """A v3 pass 0 off the comparison surface (``_find_peak(full_first=False)``): the local search
+    from just above the stuck frequency, from rest, finds the full sweep's peak in a third of its
+    points; with ``full_first`` it is the sweep itself. (Here the peak lies 0.16 % above the
+    lowest stuck mode, so the search also has to turn round; on the resonator friction lowers it.)"""
+    from fe_joint.study.fixed_point import _find_peak
+    rm = _two_grounded_masses()
+    joint = _joint(2e3)
+    lin = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint)
+    inp = SimpleNamespace(rm=rm, settings=SETTINGS)
+    ref, _ = _sweep(rm, joint, 2.0)
+    loc, state, how, why = _find_peak(inp, joint, 2.0, lin, None, None, None, full_first=False)
+    assert (how, why) == ("local", None) and state.shape[0] == 1
+    assert loc.n_points < ref.n_points / 3
+    # polished, not refined: within the flat top's spread (see test_local_peak_matches_full_sweep)
+    assert loc.peak_hz == pytest.approx(ref.peak_hz, rel=5e-4)
+    assert loc.peak_amplitude == pytest.approx(ref.peak_amplitude, rel=5e-5)
+    full, _, how, _ = _find_peak(inp, joint, 2.0, lin, None, None, None, full_first=True)
+    assert how == "sweep" and full.n_points == ref.n_points and full.peak_hz == ref.peak_hz
+
+
 def test_local_peak_without_a_peak_raises() -> None:
     """A linear joint far from its resonance: no peak within the window → an error, not a point."""
     from fe_joint.study.frf import SweepIncomplete

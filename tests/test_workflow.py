@@ -363,14 +363,15 @@ def test_tiny_excitation_peak_is_stuck_linear_mode(run: Path) -> None:
 
 
 def test_v3_local_peak_search_matches_full_sweep(run: Path) -> None:
-    """Every v3 fixed point searched its later peaks locally; the converged joint's full FRF has
-    the same peak as the last local search (the v3 tolerance is 1e-3)."""
+    """Every v3 fixed point searched its peaks locally (pass 0 too: this case has no v2 curve to
+    take from a full pass-0 sweep); the converged joint's full FRF has the same peak as the last
+    local search (the v3 tolerance is 1e-3)."""
     s = _summary(run)
     assert s["v3"]
     for name, v in s["v3"].items():
         h = v["history"]
-        assert h[0]["search"] == "sweep" and len(h) >= 2, name
-        assert all(x["search"] == "local" for x in h[1:]), (name, [x["local_failed"] for x in h])
+        assert len(h) >= 2, name
+        assert all(x["search"] == "local" for x in h), (name, [x["local_failed"] for x in h])
         assert h[-1]["sweep_peak_hz"] == pytest.approx(h[-1]["peak_hz"], rel=1e-4), name
         assert h[-1]["sweep_peak_amplitude"] == pytest.approx(h[-1]["peak_amplitude"], rel=1e-4), name
         # the peak the report shows is that full FRF's

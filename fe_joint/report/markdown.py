@@ -150,7 +150,9 @@ def _v3_row(name: str, v: dict, seconds: list) -> str:
 def _v3(s: dict, t: dict) -> list[str]:
     """The v3 fixed points, one row each (``t``: the timings)."""
     L = ["## v3 fixed point (k_t from the BEM loops at resonance)", "",
-         "Pass 0 is v2 (a full sweep); later passes search the peak locally from the previous one "
+         "Pass 0 is v2: a full sweep on the comparison surface (it is also the study's v2 curve), "
+         "elsewhere a local search from just above the stuck frequency; later passes search the "
+         "peak locally from the previous one "
          "(`local`, a full `sweep` if that fails), with Aitken-relaxed stiffness updates. The last "
          "column compares the converged joint's full FRF peak with the last pass's.", "",
          "| surface | passes | converged | peak per pass [Hz] | k_t,eq per pass [N/mm³] | search: points, s "

@@ -153,6 +153,13 @@ def follow_up_jobs(case, levels: list) -> list[Job]:
     return jobs
 
 
+def full_pass0(case, rq_um: float) -> bool:
+    """Whether the v3 fixed point on ``rq_um`` starts with a full sweep: only where its pass 0 is
+    kept as the study's v2 curve (``v2-pass0``); elsewhere pass 0 only gives a peak, found by a
+    local search (``fixed_point.run_v3``)."""
+    return "v2" in case.dynamics.configurations and float(rq_um) == float(case.roughness.v_rq_um)
+
+
 def rm_digest(rm) -> str:
     """Digest of what the FRFs read from the reduced model (matrices, pairs, DOFs, damping)."""
     return digest(np.asarray(rm.K), np.asarray(rm.M), np.asarray(rm.pair_dofs),
@@ -186,7 +193,7 @@ def job_key(inp: "StudyInputs", job: Job, rm_key: str, v3_keys: dict | None = No
     if job.kind == "v3":
         c = inp.case.contact
         return digest(common, _setup_digest(inp.setup), _surface_digest(inp.surfaces[job.rq_um]),
-                      float(c.kt_tol), int(c.kt_max_passes))
+                      float(c.kt_tol), int(c.kt_max_passes), full_pass0(inp.case, job.rq_um))
     return digest(common, (v3_keys or {})[job.rq_um])
 
 
@@ -216,7 +223,7 @@ def run_job(inp: StudyInputs, job: Job) -> dict:
         # pass 0 of the v3 fixed point is the v2 FRF at this level: kept, not run twice
         return {"curves": {key: inp.v3_out[job.rq_um]["pass0"].with_key(key)}, "meta": {},
                 "arrays": {}}
-    out = run_v3(inp, job.rq_um, level)
+    out = run_v3(inp, job.rq_um, level, full_first=full_pass0(inp.case, job.rq_um))
     meta = {"history": out["history"], "converged": out["converged"], "rq_um": job.rq_um,
             "f_lin": out["f_lin"]}
     return {"curves": {key: out["curve"].with_key(key)}, "meta": meta,
