@@ -1,5 +1,5 @@
-"""The job queue (fe_joint.study.queue.run_jobs): dependencies, prepare, failures; serial and on
-2 ranks."""
+"""The job queue (fe_joint.study.queue.run_jobs): dependencies, prepare, failures; the static
+deal (map_ranks); serial and on 2 ranks."""
 from __future__ import annotations
 
 import json
@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from fe_joint.errors import JobFailed
-from fe_joint.study.queue import run_jobs
+from fe_joint.errors import EXIT_BUG, EXIT_CONVERGENCE, JobFailed
+from fe_joint.study.queue import map_ranks, run_jobs
 
 
 @dataclass(frozen=True)
@@ -104,3 +104,41 @@ def test_dependencies_on_two_ranks(tmp_path_factory) -> None:
     if comm.rank == 0:
         val = {j.name: json.loads((d / f"{j.name}.json").read_text())["value"] for j in jobs}
         assert val == {"slow": 1, "late": 2, "q1": 1, "q2": 1, "last": 4}
+
+
+def _square_or_fail(x: int) -> int:
+    if x == 3:
+        raise ValueError("three")
+    return x * x
+
+
+@pytest.mark.mpi
+def test_map_ranks_deals_items_and_gathers_them_in_order() -> None:
+    """map_ranks on any number of ranks: every rank gets [x² for x in items] in order, each item
+    computed by rank i % size; on several ranks a failure on one is raised on every rank with its
+    exit class (a bug: 1; a ConvergenceError: 3), on one it is raised as it is."""
+    from mpi4py import MPI
+
+    from hbm import ConvergenceError
+    comm = MPI.COMM_WORLD
+    items = list(range(7))
+    got = map_ranks(lambda x: (x * x, comm.rank), items, comm)
+    assert [v for v, _ in got] == [x * x for x in items]
+    assert [r for _, r in got] == [i % comm.size for i in items]
+    assert comm.allgather(got) == [got] * comm.size
+    assert map_ranks(lambda x: x + 1, items) == [x + 1 for x in items]       # serial
+    # one rank: the failure itself; several: JobFailed on every rank, with its exit class
+    with pytest.raises(ValueError if comm.size == 1 else JobFailed) as e:
+        map_ranks(_square_or_fail, items, comm)
+    assert "three" in str(e.value)
+    if comm.size > 1:
+        assert e.value.code == EXIT_BUG and "item 3 of 7" in str(e.value)
+
+    def diverge(x):
+        if x == 4:
+            raise ConvergenceError("no", 1e-3)
+        return x
+    with pytest.raises(ConvergenceError if comm.size == 1 else JobFailed) as e:
+        map_ranks(diverge, items, comm)
+    if comm.size > 1:
+        assert e.value.code == EXIT_CONVERGENCE

@@ -20,6 +20,36 @@ def _attempt(run_job: Callable, job) -> tuple[dict | None, tuple | None]:
         return None, (job.name, code, msg, e)
 
 
+def map_ranks(fn: Callable, items: list, comm=None) -> list:
+    """``[fn(x) for x in items]``, item i computed on rank i % size, the results gathered on every
+    rank in order (collective). For items of about equal cost, as a static deal (:func:`run_jobs`
+    deals unequal ones); ``fn`` must not be collective. A failure on any rank is raised on every
+    rank as :class:`~fe_joint.errors.JobFailed` with the original's exit class.
+
+    Args:
+        fn: item → result (picklable).
+        items: the work, the same list on every rank.
+        comm: MPI communicator or None (serial).
+    """
+    if comm is None or comm.size == 1:
+        return [fn(x) for x in items]
+    mine, fail, own = {}, None, None
+    for i in range(comm.rank, len(items), comm.size):
+        try:
+            mine[i] = fn(items[i])
+        except Exception as e:  # noqa: BLE001 - raised on every rank below
+            own, fail = e, (f"item {i} of {len(items)}",) + classify(e)
+            break
+    parts = comm.allgather((mine, fail))
+    fails = [f for _, f in parts if f is not None]
+    if fails:
+        raise JobFailed(*fails[0]) from own
+    out = {}
+    for m, _ in parts:
+        out.update(m)
+    return [out[i] for i in range(len(items))]
+
+
 _TAG = 77
 #: how often rank 0's queue server looks for requests, s (jobs take 5–600 s)
 POLL_SECONDS = 0.05

@@ -37,6 +37,7 @@ from ..model.joint import JointModel, stuck_modes
 from .artifacts import BackboneKey, CurveKey, file_record, rq_label, v3_job_name
 from .configurations import joint_v2
 from .contact import InterfaceSetup, _gather_concat, _split, element_patches
+from .queue import map_ranks
 from .variants import statistics, stuck_frequency, write_json
 
 #: the folder (under dynamics/) of the loop definitions and the alternative backbones
@@ -87,15 +88,13 @@ def reversal_ratio(setup: InterfaceSetup, sc, comm=None) -> np.ndarray:
     return np.where(kn > 0, kt / np.where(kn > 0, kn, 1.0), np.nan)
 
 
-def _frequencies(rm, joints: dict) -> dict:
+def _frequencies(rm, joints: dict, comm=None) -> dict:
     """Stuck breathing-mode frequency (Hz) of each joint: the first exactly, the rest by one
-    shift-and-invert solve near it (``variants.stuck_frequency``)."""
-    out, f0 = {}, None
-    for name, j in joints.items():
-        out[name] = (stuck_modes(rm.K, rm.M, rm.pair_dofs, j).frequency if f0 is None
-                     else stuck_frequency(rm.K, rm.M, rm.pair_dofs, j, f0))
-        f0 = f0 or out[name]
-    return out
+    shift-and-invert solve near it (``variants.stuck_frequency``), dealt to the ranks."""
+    names = list(joints)
+    f0 = stuck_modes(rm.K, rm.M, rm.pair_dofs, joints[names[0]]).frequency
+    rest = map_ranks(lambda n: stuck_frequency(rm.K, rm.M, rm.pair_dofs, joints[n], f0), names[1:], comm)
+    return dict(zip(names, [f0] + rest))
 
 
 def contact_study(setup: InterfaceSetup, rm, surfaces: dict, kn_smooth: np.ndarray, comm=None) -> dict:
@@ -116,9 +115,11 @@ def contact_study(setup: InterfaceSetup, rm, surfaces: dict, kn_smooth: np.ndarr
         v2 = joint_v2(setup, surfaces[rq], f"v2-rq{rq_label(rq)}")
         joints[v2.name] = v2
         joints[f"{v2.name}-layer"] = layer_joint(v2, bulk, mindlin_ratio(nu))
-    f = _frequencies(rm, joints)
-    caps = {f"{c:g}": stuck_frequency(rm.K, rm.M, rm.pair_dofs, layer_joint(smooth, bulk, 1.0, c),
-                                      f["smooth-ms"]) for c in CAP_SENSITIVITY}
+    f = _frequencies(rm, joints, comm)
+    capped = map_ranks(lambda c: stuck_frequency(rm.K, rm.M, rm.pair_dofs,
+                                                 layer_joint(smooth, bulk, 1.0, c), f["smooth-ms"]),
+                       CAP_SENSITIVITY, comm)
+    caps = {f"{c:g}": fc for c, fc in zip(CAP_SENSITIVITY, capped)}
     ratio = {}
     for rq in sorted(surfaces):
         r = reversal_ratio(setup, surfaces[rq], comm)
