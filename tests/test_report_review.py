@@ -275,6 +275,39 @@ def test_stuck_receptance_against_a_direct_solve():
     assert np.allclose(stuck_receptance(rm, joint, f), direct, rtol=1e-9, atol=0)
 
 
+def test_stuck_receptance_cache_and_parts_from_another_rank(monkeypatch):
+    """The receptances are cached by model and springs (the FRF figures ask once per panel); parts
+    computed on another rank (``share_eigenproblems``) are served as if computed here; another
+    joint's springs miss the cache."""
+    import scipy.linalg as sla
+
+    from fe_joint.model.joint import JointModel
+    from fe_joint.report import linear_frf
+    rng = np.random.default_rng(4)
+    n = 12
+    A = rng.normal(size=(n, n))
+    rm = type("RM", (), dict(K=A @ A.T + n * np.eye(n), M=np.diag(rng.uniform(1e-3, 2e-3, n)),
+                             pair_dofs=np.arange(12).reshape(2, 2, 3), damping_ratio=2e-3,
+                             excitation_dof=0, response_dof=5))()
+
+    def joint(kn):
+        return JointModel("j", n0=np.array([10.0, 0.0]), gap=np.zeros(2), kn=np.array([kn, 1e3]),
+                          kt=np.array([2e3, 1e3]), area=np.array([1.0, 2.0]))
+    calls = []
+    eigh = sla.eigh
+    monkeypatch.setattr(linear_frf.sla, "eigh", lambda *a, **k: calls.append(1) or eigh(*a, **k))
+    f = np.linspace(50, 400, 5)
+    first = linear_frf.StuckReceptance(rm, joint(3e3))(f)
+    again = linear_frf.StuckReceptance(rm, joint(3e3))(f)
+    assert len(calls) == 1 and np.array_equal(first, again)
+    fake = (np.array([4.0, 9.0]), np.array([2.0, 3.0]), np.array([0.0, 0.1]), np.array([1.0, -1.0]))
+    linear_frf.StuckReceptance.from_parts(rm, joint(5e3), fake)
+    got = linear_frf.StuckReceptance(rm, joint(5e3))(np.array([0.0]))
+    assert len(calls) == 1 and got[0] == pytest.approx(1.0 / 4.0 - 1.0 / 9.0)
+    linear_frf.StuckReceptance(rm, joint(7e3))
+    assert len(calls) == 2
+
+
 def test_new_figures_drawn_and_linked(run):
     out, _, _, _ = run
     md = (out / "report.md").read_text()

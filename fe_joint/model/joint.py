@@ -121,10 +121,19 @@ def stuck_modes(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: Join
         _STUCK_CACHE.move_to_end(key)
         return hit[3]
     lin = _stuck_modes(K, M, pair_dofs, joint, n_modes)
+    remember_stuck_modes(K, M, pair_dofs, joint, lin, n_modes)
+    return lin
+
+
+def remember_stuck_modes(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: JointModel,
+                         lin: LinearJoint, n_modes: int = 10) -> None:
+    """Put ``lin``, the result of ``stuck_modes(K, M, pair_dofs, joint, n_modes)`` computed
+    elsewhere (another rank: ``report.linear_frf.share_eigenproblems``), in its cache."""
+    key = (id(K), id(M), id(pair_dofs), _springs_digest(joint), int(n_modes))
     _STUCK_CACHE[key] = (K, M, pair_dofs, lin)
+    _STUCK_CACHE.move_to_end(key)
     while len(_STUCK_CACHE) > STUCK_CACHE_SIZE:
         _STUCK_CACHE.popitem(last=False)
-    return lin
 
 
 def _stuck_modes(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: JointModel,

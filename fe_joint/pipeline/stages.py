@@ -367,11 +367,10 @@ def _speed_tables(ctx: StageContext) -> dict:
 
 def stage_report(ctx: StageContext) -> dict:
     """Figures, report.md, summary.json, timings.json from the artifacts of the earlier stages
-    (rank 0)."""
+    (written by rank 0; the eigenproblems of the stuck joints shared by every rank)."""
     from ..report import write_report
-    if ctx.rank == 0:
-        write_report(ctx.out, ctx.case)
-        ctx.print(f"[fe-joint] report: {ctx.path('report.md')}")
+    write_report(ctx.out, ctx.case, ctx.comm)
+    ctx.print(f"[fe-joint] report: {ctx.path('report.md')}")
     return {"written": ["report.md", "summary.json", "timings.json", "figures"]}
 
 

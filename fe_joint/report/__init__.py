@@ -26,7 +26,7 @@ from .summary import build_summary, build_timings, write_summary
 __all__ = ["ReportData", "build_summary", "build_timings", "load_report_data", "write_report"]
 
 
-def write_report(out: Path, case: Case) -> dict:
+def write_report(out: Path, case: Case, comm=None) -> dict | None:
     """Draw the figures, write report.md, summary.json, timings.json and the per-element ParaView
     files (``paraview/<curve>.xdmf``) from a run's artifacts (summary.json holds no wall time and
     no date: the same inputs give the same bytes).
@@ -34,10 +34,18 @@ def write_report(out: Path, case: Case) -> dict:
     Args:
         out: the run's folder (stage manifests, fe/, contact/, dynamics/, speed/).
         case: the validated case of the run.
+        comm: MPI communicator or None. On several ranks (collective) every rank loads the
+            artifacts and takes a share of the eigenproblems (``linear_frf.share_eigenproblems``),
+            then rank 0 alone writes.
     Returns:
-        the summary dict written to summary.json.
+        the summary dict written to summary.json (None on ranks other than 0).
     """
     data = load_report_data(Path(out), case)
+    if comm is not None and comm.size > 1:
+        from .linear_frf import share_eigenproblems
+        share_eigenproblems(data, comm)
+        if comm.rank != 0:
+            return None
     draw_figures(data, data.out / "figures")
     write_interface_results(data, data.out / PARAVIEW_FOLDER)
     summary, timings = build_summary(data), build_timings(data)
