@@ -97,13 +97,13 @@ def run_v3(inp, rq: float, level: float, full_first: bool = True) -> dict:
     Pass 0 is v2 (k_t by Mindlin): a full FRF when ``full_first`` (the comparison surface, whose
     pass 0 is also the study's v2 curve), else a local peak search from just above the stuck
     frequency (session 12: 7.8–10.1 s against 17.8–36.9 s for the full sweep on the default
-    model's other surfaces, the peak within 3e-6; a full sweep if it fails). Each further pass recomputes every loaded
-    element's k_n at its cycle-mean normal load and k_t as the slope at load reversal of its
-    patch's hysteresis loop under the tangential force amplitude at resonance, relaxed by
-    Aitken's factor (the plain iteration was seen to oscillate, ±1.5 % in peak amplitude on
-    Rq = 15 µm, and a fixed factor 0.5 to creep, 5–6 passes), and finds the new peak by a short
-    continuation from the previous one (:func:`~fe_joint.study.frf.peak_near`; a full sweep if
-    that fails). It stops when the peak frequency and amplitude change by less than
+    model's other surfaces, the peak within 3e-6; a full sweep if it fails). Each further pass
+    recomputes every loaded element's k_n at its cycle-mean normal load and k_t as the slope at
+    load reversal of its patch's hysteresis loop under the tangential force amplitude at
+    resonance, relaxed by Aitken's factor (the plain iteration was seen to oscillate, ±1.5 % in
+    peak amplitude on Rq = 15 µm, and a fixed factor 0.5 to creep, 5–6 passes), and finds the new
+    peak by a short continuation from the previous one (:func:`~fe_joint.study.frf.peak_near`; a
+    full sweep if that fails). It stops when the peak frequency and amplitude change by less than
     ``contact.kt_tol``; the converged joint then gets its full FRF, whose refined peak is the
     last pass's polished one to about 1e-6 (both in the history, a check).
 

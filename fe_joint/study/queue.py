@@ -23,8 +23,9 @@ def _attempt(run_job: Callable, job) -> tuple[dict | None, tuple | None]:
 def map_ranks(fn: Callable, items: list, comm=None) -> list:
     """``[fn(x) for x in items]``, item i computed on rank i % size, the results gathered on every
     rank in order (collective). For items of about equal cost, as a static deal (:func:`run_jobs`
-    deals unequal ones); ``fn`` must not be collective. A failure on any rank is raised on every
-    rank as :class:`~fe_joint.errors.JobFailed` with the original's exit class.
+    deals unequal ones); ``fn`` must not be collective. On several ranks a failure on any rank is
+    raised on every rank as :class:`~fe_joint.errors.JobFailed` with the original's exit class
+    (one rank: the failure itself).
 
     Args:
         fn: item → result (picklable).
