@@ -739,15 +739,15 @@ def _stick_clear(ct, Lc, kt, w):
     curve at the low level took 8.9 s instead of 12.4, _classify 1.4 s instead of 4.5)."""
     ct, Lc = np.asarray(ct), np.asarray(Lc)
     shape = np.broadcast_shapes(ct.shape[:-1], Lc.shape[:-1], np.shape(kt), np.shape(w))
-    ct, Lc = np.broadcast_to(ct, shape + (4,)), np.broadcast_to(Lc, shape + (4,))
-    kt, w = np.broadcast_to(kt, shape), np.broadcast_to(w, shape)
-    d = np.abs(ct[..., 1:]).sum(axis=-1) + np.abs(ct[..., 0] - w)
-    out = np.array(kt * d <= Lc[..., 0] - np.abs(Lc[..., 1:]).sum(axis=-1), ndmin=1)
-    rest = ~out.reshape(shape) if shape else ~out
+    # flat over the steps (a scalar step too), so that the rest can be picked by a mask
+    ct = np.broadcast_to(ct, shape + (4,)).reshape(-1, 4)
+    Lc = np.broadcast_to(Lc, shape + (4,)).reshape(-1, 4)
+    kt, w = np.broadcast_to(kt, shape).ravel(), np.broadcast_to(w, shape).ravel()
+    d = np.abs(ct[:, 1:]).sum(axis=-1) + np.abs(ct[:, 0] - w)
+    out = kt * d <= Lc[:, 0] - np.abs(Lc[:, 1:]).sum(axis=-1)
+    rest = ~out
     if rest.any():
-        sel = (lambda a: a[rest]) if shape else (lambda a: a[None])
-        out[rest if shape else slice(None)] = (
-            _excess_sq(sel(ct), sel(Lc), sel(kt), sel(w)) @ _BERN.T).max(axis=-1) <= 0.0
+        out[rest] = (_excess_sq(ct[rest], Lc[rest], kt[rest], w[rest]) @ _BERN.T).max(axis=-1) <= 0.0
     return out.reshape(shape)
 
 
