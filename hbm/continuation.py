@@ -66,6 +66,14 @@ CORRECTOR_STALLS = 2
 #: how many segments of the branch before the current point a new point is checked against
 #: (``_Branch._retraces``)
 RETRACE_SEGMENTS = 8
+#: a failed corrector on the GMRES path is taken for a corner fold only when the tangent at its
+#: predictor (one GMRES solve, no sign) turned from the current one by more than acos(SHARP_TURN):
+#: with a smaller turn the piece ahead crosses the hyperplane, Newton only failed to reach it,
+#: and a halved step is cheaper than the restart's dense LU. At most this many such failures per
+#: point; after them the restart is tried whatever the turn. (Session 13: the default model's
+#: top-level corner restarts all failed, with turns of 0.90-0.99, 4.6-8.4 s each on
+#: baseline@L2; the quick model's restarts that were needed turned by -0.28-0.52.)
+SMOOTH_FAILURES = 2
 
 
 @dataclass
@@ -410,6 +418,7 @@ class _Branch:
         # keep the Jacobian on each point only where Hill's method may use it (memory)
         self.keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
         self.t_beyond = None      # tangent of the piece beyond the last corner restart
+        self.smooth_failures = 0  # failed correctors of the next point taken for no corner
         self.sols, self.taus = [sol], [self.t[-1]]
         self.amp_prev = sol.amplitude(dof)
         self.amps = [self.amp_prev]
@@ -438,6 +447,7 @@ class _Branch:
         s = self.settings
         Y = self.sc.Y(self.U, self.w)
         flipped = False
+        self.smooth_failures = 0
         while True:
             self.ds = _cap_step(self.ds, self.t, self.sc.ws, self.max_domega)
             Yp = Y + self.ds * self.t
@@ -512,15 +522,31 @@ class _Branch:
         Returns:
             (the restart's _Correction, accepted?: converged and moved by > 1e-3 ds from Y).
         """
-        self._exact_reference()
         Up, wp = self.sc.unscale(Yp)
         evp = _evaluate(self.hb, self.force, Up, wp)
+        if self._smooth_failure(wp, evp):
+            return failed, False
+        self._exact_reference()
         tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign, exact_sign=True)
         self.t_beyond = tb
         Yc = self.sc.Y(failed.U, failed.w)
         corr = _correct(self.hb, self.force, self.sc, Yc + self.ds * tb, tb, self.settings.max_corrector)
         self.total_it += corr.it
         return corr, bool(corr.ok and np.linalg.norm(self.sc.Y(corr.U, corr.w) - Y) > 1e-3 * self.ds)
+
+    def _smooth_failure(self, wp: float, evp: _Eval) -> bool:
+        """True if a failed corrector is no corner fold (``SMOOTH_FAILURES``): on the GMRES path,
+        the unsigned tangent at the predictor (frequency wp, evaluated in ``evp``) turned from
+        the current one by less than acos(SHARP_TURN). Counts such failures of this point; on
+        the dense path (a sign comes with every solve) always False."""
+        if self.smooth_failures >= SMOOTH_FAILURES:
+            return False
+        tg, sign = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, None)
+        if sign != 0 or abs(tg @ self.t) < SHARP_TURN:
+            return False
+        self.smooth_failures += 1
+        self.hb.stats["smooth_failures"] += 1
+        return True
 
     def _exact_reference(self) -> None:
         """Make ``ref_sign`` known at the current point when no sign has been computed on the

@@ -279,9 +279,10 @@ class HarmonicBalance:
         self._dense_left, self._dense_size = 0, 0     # dense solves owed to the last fallbacks
         self._gmres_failed = False                    # the last GMRES solve failed
         self.krylov_tol = float(krylov_tol)
-        self.stats = {"residuals": 0, "jacobians": 0, "linear_solves": 0, "gmres_iterations": 0, "sign_factorizations": 0,
-                      "dense_fallbacks": 0, "dense_after_fallback": 0, "preconditioners": 0,
-                      "lu_single": 0, "lu_double": 0}
+        self.stats = {"residuals": 0, "jacobians": 0, "linear_solves": 0, "gmres_iterations": 0,
+                      "sign_factorizations": 0, "smooth_failures": 0, "dense_fallbacks": 0,
+                      "dense_after_fallback": 0, "preconditioners": 0, "lu_single": 0,
+                      "lu_double": 0}
 
     # ------------------------------------------------------------------ layouts
     def to_contact(self, U: np.ndarray) -> np.ndarray:

@@ -409,3 +409,28 @@ def test_a_point_on_the_branch_already_traced_is_a_retrace():
     assert not retraces(corr(6.0, 1.6))                  # ahead
     assert not retraces(corr(6.0, 1.45))                 # back in ω, on in U: a fold
     assert not retraces(corr(4.5, 1.45))                 # the current segment itself is not checked
+
+
+def test_a_failed_corrector_with_a_smooth_tangent_halves_the_step(monkeypatch):
+    """``_Branch._smooth_failure``: on the GMRES path (no determinant sign) a failed corrector
+    whose predictor's tangent turned by less than acos(SHARP_TURN) is no corner fold (the step
+    halves, no dense LU), at most SMOOTH_FAILURES times per point; a sharper turn, a sign from
+    the dense path, or the limit reached sends it to the corner restart."""
+    from types import SimpleNamespace
+
+    from hbm import continuation as cn
+    t = np.array([1.0, 0.0])
+    answers = []
+    monkeypatch.setattr(cn, "_tangent", lambda *a, **k: answers.pop(0))
+    hb = SimpleNamespace(stats={"smooth_failures": 0})
+    br = SimpleNamespace(hb=hb, force=None, sc=None, t=t, smooth_failures=0)
+    smooth = lambda: cn._Branch._smooth_failure(br, 1.0, None)      # noqa: E731
+    turn = lambda c: (np.array([c, np.sqrt(1 - c * c)]), 0)         # noqa: E731
+    answers[:] = [turn(0.95), turn(-0.97)]
+    assert smooth() and smooth() and br.smooth_failures == cn.SMOOTH_FAILURES == 2
+    answers[:] = [turn(0.99)]
+    assert not smooth() and answers            # the limit: no tangent asked for
+    br.smooth_failures = 0
+    answers[:] = [turn(0.5), turn(-0.3), (turn(0.99)[0], 1)]
+    assert not smooth() and not smooth() and not smooth() and not answers
+    assert hb.stats["smooth_failures"] == 2 and br.smooth_failures == 0
