@@ -239,10 +239,11 @@ def test_gmres_path_passes_corner_folds_like_the_dense_path():
 
 
 def test_carried_sign_is_the_exact_sign_at_every_corner(monkeypatch):
-    """The inclined contact's branch on the GMRES path: at every corner restart after the first,
-    the determinant sign carried along the branch from the last exact one equals the sign a dense
+    """The inclined contact's branch on the GMRES path: at every corner restart, the
+    determinant sign carried along the branch from the last exact one equals the sign a dense
     LU gives at the current point (what the former rule computed there: 23 sign LUs on this
-    branch, 14 now)."""
+    branch, 14 now). The first restart's too: a branch that starts with a small reduced system
+    takes its sign at the start (``START_SIGN_SIZE``)."""
     import hbm.continuation as cont
     checks, restarts = [], []
     restart = cont._Branch._corner_restart
@@ -262,8 +263,8 @@ def test_carried_sign_is_the_exact_sign_at_every_corner(monkeypatch):
     hb = ForcedPath(s, c, lambda w: True, harmonics=1, samples=32)
     frf = hb.frf(0.4, 2.5, np.array([0.4]), dof=0, stability="none")
     assert frf.omega[-1] == 2.5 and len(restarts) >= 4
-    # a sign is known at every restart but the first: no LU at the current point after it
-    assert len(checks) >= len(restarts) - 1
+    # a sign is known at every restart, the first included: no LU at the current point
+    assert len(checks) == len(restarts)
     assert all(carried == fresh for carried, fresh in checks)
 
 
@@ -434,3 +435,27 @@ def test_a_failed_corrector_with_a_smooth_tangent_halves_the_step(monkeypatch):
     answers[:] = [turn(0.5), turn(-0.3), (turn(0.99)[0], 1)]
     assert not smooth() and not smooth() and not smooth() and not answers
     assert hb.stats["smooth_failures"] == 2 and br.smooth_failures == 0
+
+
+def test_a_branch_starting_small_on_the_gmres_path_takes_its_sign_there(monkeypatch):
+    """A Jenkins oscillator slipping from the start, every solve on the GMRES path: its branch
+    takes the determinant sign at the start by one dense LU (a reduced system within
+    ``START_SIGN_SIZE``), the sign the dense path finds there; above that size it starts with
+    none (0), as before."""
+    from hbm import continuation as cn
+    s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
+    c = FrictionContacts(np.array([[[0, -1, -1], [-1, -1, -1]]]), kt=1.0, kn=1.0, mu=0.1, n0=1.0)
+    settings = ContinuationSettings(ds_max=0.3)
+    f = np.array([0.3])
+    signs = {}
+    for name, gmres in (("gmres", lambda w: True), ("dense", lambda w: False)):
+        hb = ForcedPath(s, c, gmres, harmonics=1, samples=256)
+        br = cn._Branch(hb, f, 0, 0.7, 1.8, settings)
+        assert br.sols[0].n_nonlinear == 1
+        signs[name] = (br.ref_sign, hb.stats["sign_factorizations"])
+    assert signs["gmres"][0] == signs["dense"][0] != 0
+    assert signs["gmres"][1] == 1 and signs["dense"][1] == 0
+    monkeypatch.setattr(cn, "START_SIGN_SIZE", 8)        # the reduced system has 9 unknowns
+    hb = ForcedPath(s, c, lambda w: True, harmonics=1, samples=256)
+    assert cn._Branch(hb, f, 0, 0.7, 1.8, settings).ref_sign == 0
+    assert hb.stats["sign_factorizations"] == 0
