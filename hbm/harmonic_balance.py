@@ -491,17 +491,22 @@ class HarmonicBalance:
         return X
 
     def linsolve(self, omega: float, nl: np.ndarray, Dg, rhs: list[np.ndarray],
-                 atol: list | None = None) -> list[np.ndarray]:
+                 atol: list | None = None, direct: bool = False) -> list[np.ndarray]:
         """Solve J x = rhs (each (n_H, n_c)) with J = I + G dg/dU, reduced on the nonlinear elements.
 
         Args:
             atol: per right-hand side, the linear residual a Newton step needs (None: none,
                 ``krylov_tol`` relative; see :meth:`krylov_rtol`); GMRES path only.
+            direct: the dense LU whatever the size, as after a failed GMRES run (a fallback).
         """
         self.stats["linear_solves"] += 1
         if nl.size == 0:
             return [r.copy() for r in rhs]
-        cn, idx, matvec, J, prec = self._reduced(omega, nl, Dg)
+        if direct:
+            cn, idx = (3 * nl[:, None] + np.arange(3)).ravel(), self._elidx(nl.size)
+            J = self._dense_fallback(omega, nl, Dg)
+        else:
+            cn, idx, matvec, J, prec = self._reduced(omega, nl, Dg)
         B = np.stack([r[:, cn].ravel() for r in rhs], axis=1)   # (P, nrhs) reduced layout
         if J is None:
             try:
@@ -511,6 +516,55 @@ class HarmonicBalance:
         if J is not None:
             X = lu_solve(J, B, self.stats)
         return [r - self._expand(omega, nl, cn, idx, Dg, X[:, i]) for i, r in enumerate(rhs)]
+
+    def linsolve_bordered(self, omega: float, nl: np.ndarray, Dg, cols: list[np.ndarray],
+                          rows: list[np.ndarray], S: np.ndarray, R: np.ndarray, r: np.ndarray,
+                          row_scale: float = 1.0):
+        """One GMRES run on a Newton system with m borders (the nonlinear modes' frequency and
+        damping), where ``linsolve`` would take m + 1 runs:
+
+            dU + G D dU + sum_k cols[k] s_k = -R,   rows[j] . (D dU) + sum_k S[j, k] s_k = -r[j],
+
+        with D = dg/dU (nonzero on the nonlinear elements only), reduced on them as ``linsolve``
+        does. The border rows are multiplied by ``row_scale`` (the weight of their residual
+        against R's in the caller's merit).
+
+        Args:
+            cols: m arrays (n_H, n_c), the residual's derivatives in the border unknowns.
+            rows: m arrays (n_H, n_c): the border equations' functionals of D dU.
+            S: (m, m) the border equations' derivatives in the border unknowns.
+            R: (n_H, n_c) residual; r: (m,) border residuals.
+        Returns:
+            (dU (n_H, n_c), s (m,)), or None where the dense path applies (``dense_limit``,
+            after GMRES failures): the caller then solves the m + 1 right-hand sides with
+            ``linsolve``. Raises ConvergenceError where GMRES fails (then ``linsolve`` with
+            ``direct``, as ``linsolve`` itself falls back).
+        """
+        k, m = nl.size, len(cols)
+        P = self.nH * 3 * k
+        if k == 0 or P <= self.dense_limit or (
+                self._dense_left > 0 and P >= DENSE_FALLBACK_SIZE * self._dense_size):
+            return None
+        self.stats["linear_solves"] += 1
+        cn, idx, matvec, _, prec = self._reduced(omega, nl, Dg)
+        C = np.stack([c[:, cn].ravel() for c in cols], axis=1)              # (P, m)
+        V = np.empty((m, P))
+        for j, row in enumerate(rows):                  # rows . (D x) = (D^T rows) . x
+            rN = row[:, cn].ravel()
+            V[j, idx] = np.einsum("kyx,ky->kx", Dg, rN[idx])
+        V *= row_scale
+        Ss = row_scale * np.asarray(S, float)
+
+        def mv(z):
+            return np.concatenate([matvec(z[:P]) + C @ z[P:], V @ z[:P] + Ss @ z[P:]])
+
+        def pc(z):
+            return np.concatenate([prec(z[:P]), np.linalg.solve(Ss, z[P:])])
+        b = np.concatenate([-R[:, cn].ravel(), -row_scale * np.asarray(r, float)])
+        z = self._krylov(mv, pc, b[:, None], P + m)[:, 0]
+        s_ = z[P:]
+        dU = -R - sum(c * sk for c, sk in zip(cols, s_)) - self._expand(omega, nl, cn, idx, Dg, z[:P])
+        return dU, s_
 
     def _dense_fallback(self, omega, nl, Dg, out=None):
         """The reduced Jacobian formed for an LU solve where GMRES stalled: a preconditioner can

@@ -27,8 +27,11 @@ receptance and its coordinate is imposed:
 
 Unknowns U (n_H x n_c), w, xi; equations n_H n_c + 2. Stuck and open-all-cycle elements have
 dg/dU = 0 as in the forced solver, so each Newton step is the forced solver's reduced linear
-solve (``HarmonicBalance.linsolve``, LU or GMRES on the nonlinear elements only) with three
-right-hand sides (-R, -dR/dw, -dR/dxi), then a 2 x 2 solve for (dw, dxi) (block elimination).
+solve on the nonlinear elements only. On the dense path (LU) it has three right-hand sides
+(-R, -dR/dw, -dR/dxi), then a 2 x 2 solve for (dw, dxi) (block elimination); on the GMRES path
+one run on the system bordered by w and xi (``HarmonicBalance.linsolve_bordered``), which took
+3414 GMRES iterations on the default model's baseline backbone where the three right-hand
+sides took 9722 (the same Newton iterations).
 The Jacobian is analytic: the AFT part is the friction elements' exact Jacobian, the w and xi
 derivatives of the modal factors are in closed form.
 
@@ -425,16 +428,7 @@ class NonlinearModeProblem:
             # step needs (inexact Newton, harmonic_balance.KRYLOV_FORCING) the stiff layer
             # joint's backbone took 455 residuals instead of 359 and 184 s instead of 150 s
             # (session 11), near its kinks
-            X0, Xw, Xx = self.ep.linsolve(w, nl, Dg, [-R, -dRw, -dRx])
-            cw = self._row(self._dg(nl, Dg, Xw), a) + dSw
-            cx = self._row(self._dg(nl, Dg, Xx), a) + dSx
-            b = -r - self._row(self._dg(nl, Dg, X0), a)
-            A = np.array([[cw.real, cx.real], [cw.imag, cx.imag]])
-            try:
-                dw, dxi = np.linalg.solve(A, [b.real, b.imag])
-            except np.linalg.LinAlgError:
-                raise ConvergenceError(f"singular EPMC Newton system at a = {a:.6g}", phi) from None
-            dU = X0 + Xw * dw + Xx * dxi
+            dU, dw, dxi = self._step(U, w, nl, Dg, R, r, (dRw, dSw), (dRx, dSx), a, sU, phi)
             alpha = 1.0
             for _ in range(12):
                 Ut, wt, xt = U + alpha * dU, w + alpha * dw, xi + alpha * dxi
@@ -454,6 +448,39 @@ class NonlinearModeProblem:
             phi, sU = phit, sUt
         raise ConvergenceError(f"EPMC Newton did not converge at modal amplitude {a:.6g}",
                                min(phi, best[0]))
+
+    def _step(self, U, w, nl, Dg, R, r, dw_terms, dxi_terms, a, sU, phi):
+        """The Newton step (dU, dw, dxi). On the GMRES path one bordered solve (the frequency and
+        damping as its two borders, ``HarmonicBalance.linsolve_bordered``); else, or where it
+        fails (then by the dense LU), three right-hand sides (-R, -dR/dw, -dR/dxi) and a 2 x 2
+        elimination. (The default model's backbones took three GMRES runs of ~48 iterations
+        each per step.)"""
+        (dRw, dSw), (dRx, dSx) = dw_terms, dxi_terms
+        re, im = np.zeros(self.shape_u), np.zeros(self.shape_u)
+        re[1] = self.psi_j / (self.lam_j * a)             # row(dg) = re . dg + i im . dg
+        im[2] = -re[1]
+        S = np.array([[dSw.real, dSx.real], [dSw.imag, dSx.imag]])
+        # the border rows weighted as in the merit: |R| / sU against |r|
+        try:
+            one = self.ep.linsolve_bordered(w, nl, Dg, [dRw, dRx], [re, im], S, R,
+                                            np.array([r.real, r.imag]), row_scale=sU)
+        except ConvergenceError:                 # GMRES failed: the dense LU, as linsolve does
+            one, direct = None, True
+        else:
+            direct = False
+        if one is not None:
+            dU, (dw, dxi) = one
+            return dU, float(dw), float(dxi)
+        X0, Xw, Xx = self.ep.linsolve(w, nl, Dg, [-R, -dRw, -dRx], direct=direct)
+        cw = self._row(self._dg(nl, Dg, Xw), a) + dSw
+        cx = self._row(self._dg(nl, Dg, Xx), a) + dSx
+        b = -r - self._row(self._dg(nl, Dg, X0), a)
+        A = np.array([[cw.real, cx.real], [cw.imag, cx.imag]])
+        try:
+            dw, dxi = np.linalg.solve(A, [b.real, b.imag])
+        except np.linalg.LinAlgError:
+            raise ConvergenceError(f"singular EPMC Newton system at a = {a:.6g}", phi) from None
+        return X0 + Xw * dw + Xx * dxi, dw, dxi
 
     # ------------------------------------------------------------------ post-processing
     def modal_coordinates(self, g: np.ndarray, w: float, xi: float, a: float) -> np.ndarray:

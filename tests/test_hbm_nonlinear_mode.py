@@ -455,3 +455,71 @@ def test_backbone_steps_over_a_kink_after_two_stalls(monkeypatch):
         # the whole step to the amplitude fails, the halved one reaches lo; from lo, ``fails``
         # runs towards it fail before the step over it
         assert len(failed) == 1 + fails and bb.modal_amplitude.size == full.modal_amplitude.size - 1
+
+
+def test_gmres_path_backbone_is_one_bordered_solve_per_step(monkeypatch):
+    """On the GMRES path each EPMC Newton step is one GMRES run on the system bordered by the
+    frequency and the damping (``HarmonicBalance.linsolve_bordered``) instead of three: the
+    Jenkins backbone still equals the describing function (as on the dense path, to 1e-6), and
+    a chain with 8 friction elements (H = 3) gives the dense path's backbone."""
+    from hbm import harmonic_balance as hbm_
+    calls = {"bordered": 0, "fallback": 0}
+    bordered = hbm_.HarmonicBalance.linsolve_bordered
+
+    def counted(self, *args, **kwargs):
+        out = bordered(self, *args, **kwargs)
+        calls["bordered" if out is not None else "fallback"] += 1
+        return out
+    monkeypatch.setattr(hbm_.HarmonicBalance, "linsolve_bordered", counted)
+    hb = jenkins_1dof(1, 4096)
+    hb.dense_limit = -1
+    bb = hb.nonlinear_mode(0, (0.05, 5.0), dof=0, n_points=12)
+    A = bb.displacement_amplitude
+    w, xi, zeta, W = jenkins_backbone_h1(A, M1, K1, C1, KT, FS)
+    assert np.max(np.abs(bb.omega / w - 1)) <= 1e-6
+    assert np.max(np.abs(bb.zeta / zeta - 1)) <= 1e-6
+    assert calls["bordered"] >= 10 and calls["fallback"] == 0
+    from test_hbm_preconditioner import _solver
+    runs = {}
+    for limit in (0, 10**6):
+        hbc, _ = _solver(H=3, ne=8, n=60, seed=1)
+        hbc.dense_limit = limit
+        calls["bordered"] = 0
+        runs[limit] = hbc.nonlinear_mode(0, (0.05, 3.0), dof=5, n_points=8)
+        assert (calls["bordered"] >= 8) == (limit == 0)
+    a, b = runs[0], runs[10**6]
+    assert len(a.omega) == len(b.omega) >= 8 and (a.element_status > 0).sum() >= 8
+    assert np.max(np.abs(a.omega / b.omega - 1)) <= 1e-8
+    assert np.max(np.abs(a.zeta / b.zeta - 1)) <= 1e-6
+
+
+def test_bordered_step_is_the_newton_step_of_the_dense_jacobian(monkeypatch):
+    # the GMRES path's one bordered solve (``NonlinearModeProblem._step``) against the Newton
+    # step of the analytic dense Jacobian (``jacobian``, checked against finite differences
+    # above), off the solution where both elements slip
+    _, _, hb = _two_dof(damping_ratio=0.005, H=3, nt=256, dofs=(0, 1), kt=(1.0, 0.7))
+    hb.dense_limit = -1
+    prob = NonlinearModeProblem(hb, 0)
+    a = 1.0
+    U, w, xi, *_ = prob.solve(a, *prob.linear_point(a))
+    x = np.concatenate([U.ravel(), [w, xi]])
+    x = x + 1e-3 * np.random.default_rng(0).standard_normal(x.size) * np.abs(x).max()
+    ref = np.linalg.solve(prob.jacobian(x, a), -prob.residual(x, a))
+    U, w, xi = prob.split(x)
+    R, r, g, nl, Dg = prob._eval(U, w, xi, a)
+    assert nl.size == 2
+    _, sU = prob._merit(R, r, U, a)
+    dU, dw, dxi = prob._step(U, w, nl, Dg, R, r, *prob._param_derivs(g, w, xi, a), a, sU, 1.0)
+    assert hb.stats["dense_fallbacks"] == 0 and hb.stats["gmres_iterations"] > 0
+    step = np.concatenate([dU.ravel(), [dw, dxi]])
+    assert np.abs(step - ref).max() <= 1e-8 * np.abs(ref).max()
+    # where the bordered GMRES run fails, the step comes from the dense LU straight away
+    from hbm.errors import ConvergenceError
+
+    def failing(*args, **kwargs):
+        raise ConvergenceError("GMRES did not converge", 1.0)
+    monkeypatch.setattr(prob.ep, "_krylov", failing)
+    dU, dw, dxi = prob._step(U, w, nl, Dg, R, r, *prob._param_derivs(g, w, xi, a), a, sU, 1.0)
+    assert hb.stats["dense_fallbacks"] == 1
+    step = np.concatenate([dU.ravel(), [dw, dxi]])
+    assert np.abs(step - ref).max() <= 1e-8 * np.abs(ref).max()
