@@ -19,7 +19,9 @@
   determinant sign, and the corrector restarts from the corner along it. There the tangent can
   turn by more than 90 deg, and t . t_prev > 0 would send the branch back the way it came. So on
   the GMRES path the sign at the predictor comes from a dense LU of the bordered system
-  (``linsolve_aug(exact_sign=True)``), and so does the current point's while no sign is known
+  (``linsolve_aug(exact_sign=True)``) where the tangent there turned sharply (t . t_prev <
+  ``SHARP_TURN``; a smaller turn keeps t . t_prev > 0, no LU), and so does the current point's
+  while no sign is known
   yet (the first corner of a branch); the point accepted beyond the corner is oriented by
   t . t_beyond > 0 against the tangent of the piece it lies on. A step whose GMRES tangent turned
   sharply (t . t_prev < ``SHARP_TURN``, a corner passed within one step, or a second corner right
@@ -72,14 +74,6 @@ RETRACE_SEGMENTS = 8
 #: more elements slip (the default model's top-level sweeps: 71 nonlinear elements at the
 #: start, 1491 unknowns; 313-353 at the first sharp turn, 6600-7400 unknowns, 2.9-3.7 s)
 START_SIGN_SIZE = 3000
-#: a failed corrector on the GMRES path is taken for a corner fold only when the tangent at its
-#: predictor (one GMRES solve, no sign) turned from the current one by more than acos(SHARP_TURN):
-#: with a smaller turn the piece ahead crosses the hyperplane, Newton only failed to reach it,
-#: and a halved step is cheaper than the restart's dense LU. At most this many such failures per
-#: point; after them the restart is tried whatever the turn. (Session 13: the default model's
-#: top-level corner restarts all failed, with turns of 0.90-0.99, 4.6-8.4 s each on
-#: baseline@L2; the quick model's restarts that were needed turned by -0.28-0.52.)
-SMOOTH_FAILURES = 2
 
 
 @dataclass
@@ -426,7 +420,6 @@ class _Branch:
         # keep the Jacobian on each point only where Hill's method may use it (memory)
         self.keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
         self.t_beyond = None      # tangent of the piece beyond the last corner restart
-        self.smooth_failures = 0  # failed correctors of the next point taken for no corner
         self.sols, self.taus = [sol], [self.t[-1]]
         self.amp_prev = sol.amplitude(dof)
         self.amps = [self.amp_prev]
@@ -455,7 +448,6 @@ class _Branch:
         s = self.settings
         Y = self.sc.Y(self.U, self.w)
         flipped = False
-        self.smooth_failures = 0
         while True:
             self.ds = _cap_step(self.ds, self.t, self.sc.ws, self.max_domega)
             Yp = Y + self.ds * self.t
@@ -523,38 +515,47 @@ class _Branch:
         the hyperplane ahead. Take the tangent of the piece beyond the corner (Jacobian at the
         predictor Yp), orient it by the bordered-determinant sign, and restart the corrector from
         the corner (the failed corrector's last iterate) along it. The predictor's sign is exact
-        (dense LU on the GMRES path); the current point's is the sign carried along the branch,
-        computed here only when none is known yet (``_exact_reference``). The oriented tangent is
-        kept as ``t_beyond``, the orientation of the point accepted beyond the corner.
+        (dense LU on the GMRES path, unless the turn is small: ``_small_turn``); the current
+        point's is the sign carried along the branch, computed here only when none is known yet
+        (``_exact_reference``). The oriented tangent is kept as ``t_beyond``, the orientation of
+        the point accepted beyond the corner.
 
         Returns:
             (the restart's _Correction, accepted?: converged and moved by > 1e-3 ds from Y).
         """
         Up, wp = self.sc.unscale(Yp)
         evp = _evaluate(self.hb, self.force, Up, wp)
-        if self._smooth_failure(wp, evp):
-            return failed, False
-        self._exact_reference()
-        tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign, exact_sign=True)
+        tb = self._small_turn(wp, evp)
+        if tb is None:
+            self._exact_reference()
+            tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign,
+                             exact_sign=True)
         self.t_beyond = tb
         Yc = self.sc.Y(failed.U, failed.w)
         corr = _correct(self.hb, self.force, self.sc, Yc + self.ds * tb, tb, self.settings.max_corrector)
         self.total_it += corr.it
         return corr, bool(corr.ok and np.linalg.norm(self.sc.Y(corr.U, corr.w) - Y) > 1e-3 * self.ds)
 
-    def _smooth_failure(self, wp: float, evp: _Eval) -> bool:
-        """True if a failed corrector is no corner fold (``SMOOTH_FAILURES``): on the GMRES path,
-        the unsigned tangent at the predictor (frequency wp, evaluated in ``evp``) turned from
-        the current one by less than acos(SHARP_TURN). Counts such failures of this point; on
-        the dense path (a sign comes with every solve) always False."""
-        if self.smooth_failures >= SMOOTH_FAILURES:
-            return False
+    def _small_turn(self, wp: float, evp: _Eval) -> np.ndarray | None:
+        """The restart's tangent at the predictor (frequency wp, evaluated in ``evp``) without a
+        dense LU where the turn is small: on the GMRES path, the tangent found with the current
+        one as last row (so t . t_prev > 0) when t . t_prev >= SHARP_TURN, the orientation a
+        smooth step keeps (a corner that turns the branch back turns it by far more). None on
+        the dense path (its sign comes with the solve; the caller takes it there) and for a
+        sharper turn (the caller's dense LU orients it).
+
+        Session 13: the default model's top-level corner restarts turned by 0.90-0.99 (every one
+        failed, each after a 3.4 s LU); the restarts the 32-sample speed-stage search needed
+        turned by 0.95 and 0.99, the quick model's by -0.40 … 0.99. Halving instead of such a
+        restart (tried first) missed those: their branch crawled up to a corner in steps of
+        1e-8 and stopped below ds_min."""
+        if self.hb.nH * 3 * evp.nl.size <= self.hb.dense_limit:
+            return None
         tg, sign = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, None)
-        if sign != 0 or abs(tg @ self.t) < SHARP_TURN:
-            return False
-        self.smooth_failures += 1
-        self.hb.stats["smooth_failures"] += 1
-        return True
+        if sign != 0 or tg @ self.t < SHARP_TURN:
+            return None
+        self.hb.stats["unsigned_restarts"] += 1
+        return tg
 
     def _exact_reference(self) -> None:
         """Make ``ref_sign`` known at the current point when no sign has been computed on the

@@ -280,7 +280,7 @@ class HarmonicBalance:
         self._gmres_failed = False                    # the last GMRES solve failed
         self.krylov_tol = float(krylov_tol)
         self.stats = {"residuals": 0, "jacobians": 0, "linear_solves": 0, "gmres_iterations": 0,
-                      "sign_factorizations": 0, "smooth_failures": 0, "dense_fallbacks": 0,
+                      "sign_factorizations": 0, "unsigned_restarts": 0, "dense_fallbacks": 0,
                       "dense_after_fallback": 0, "preconditioners": 0, "lu_single": 0,
                       "lu_double": 0}
 

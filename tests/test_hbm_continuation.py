@@ -412,29 +412,35 @@ def test_a_point_on_the_branch_already_traced_is_a_retrace():
     assert not retraces(corr(4.5, 1.45))                 # the current segment itself is not checked
 
 
-def test_a_failed_corrector_with_a_smooth_tangent_halves_the_step(monkeypatch):
-    """``_Branch._smooth_failure``: on the GMRES path (no determinant sign) a failed corrector
-    whose predictor's tangent turned by less than acos(SHARP_TURN) is no corner fold (the step
-    halves, no dense LU), at most SMOOTH_FAILURES times per point; a sharper turn, a sign from
-    the dense path, or the limit reached sends it to the corner restart."""
+
+def test_a_corner_restart_with_a_small_turn_takes_no_lu(monkeypatch):
+    """``_Branch._small_turn``: on the GMRES path (no determinant sign) a corner restart whose
+    tangent at the predictor turned by less than acos(SHARP_TURN) restarts along it, oriented
+    with t . t_prev > 0, without a dense LU; a sharper turn, a sign from the dense path, or a
+    system on the dense path leaves the orientation to the dense LU (None)."""
     from types import SimpleNamespace
 
     from hbm import continuation as cn
     t = np.array([1.0, 0.0])
     answers = []
-    monkeypatch.setattr(cn, "_tangent", lambda *a, **k: answers.pop(0))
-    hb = SimpleNamespace(stats={"smooth_failures": 0})
-    br = SimpleNamespace(hb=hb, force=None, sc=None, t=t, smooth_failures=0)
-    smooth = lambda: cn._Branch._smooth_failure(br, 1.0, None)      # noqa: E731
+
+    def tangent(*args, **kwargs):
+        assert not kwargs.get("exact_sign")
+        return answers.pop(0)
+    monkeypatch.setattr(cn, "_tangent", tangent)
+    hb = SimpleNamespace(stats={"unsigned_restarts": 0}, nH=3, dense_limit=10)
+    br = SimpleNamespace(hb=hb, force=None, sc=None, t=t)
+    ev = SimpleNamespace(nl=np.arange(2))                  # 18 unknowns: the GMRES path
+    small = lambda: cn._Branch._small_turn(br, 1.0, ev)    # noqa: E731
     turn = lambda c: (np.array([c, np.sqrt(1 - c * c)]), 0)         # noqa: E731
-    answers[:] = [turn(0.95), turn(-0.97)]
-    assert smooth() and smooth() and br.smooth_failures == cn.SMOOTH_FAILURES == 2
+    answers[:] = [turn(0.95)]
+    assert np.array_equal(small(), turn(0.95)[0]) and hb.stats["unsigned_restarts"] == 1
+    answers[:] = [turn(0.5), (turn(0.99)[0], 1)]
+    assert small() is None and small() is None and not answers
+    hb.dense_limit = 18
     answers[:] = [turn(0.99)]
-    assert not smooth() and answers            # the limit: no tangent asked for
-    br.smooth_failures = 0
-    answers[:] = [turn(0.5), turn(-0.3), (turn(0.99)[0], 1)]
-    assert not smooth() and not smooth() and not smooth() and not answers
-    assert hb.stats["smooth_failures"] == 2 and br.smooth_failures == 0
+    assert small() is None and answers                     # the dense path: no tangent asked
+    assert hb.stats["unsigned_restarts"] == 1
 
 
 def test_a_branch_starting_small_on_the_gmres_path_takes_its_sign_there(monkeypatch):
