@@ -510,3 +510,21 @@ def test_a_top_the_sweep_stepped_over_is_resampled_not_traced(monkeypatch) -> No
         assert calls["local"] == 1, kt
         assert cr.peak_hz == pytest.approx(traced.peak_hz, rel=1e-9), kt
         assert cr.peak_amplitude == pytest.approx(traced.peak_amplitude, rel=1e-9), kt
+
+
+def test_the_validated_structure_is_kept_per_reduced_model():
+    # ``frf.structure``: one validated LinearStructure per reduced model (by identity) for the
+    # last two models, equal to a fresh one; a third model evicts the oldest
+    from fe_joint.study import frf as frf_
+    from hbm import LinearStructure
+    frf_._STRUCTURES.clear()
+    rms = [SimpleNamespace(M=np.diag([1.0, 2.0 + i]), K=np.array([[3.0, -1.0], [-1.0, 2.0]]),
+                           damping_ratio=0.01) for i in range(3)]
+    s0 = frf_.structure(rms[0])
+    assert frf_.structure(rms[0]) is s0
+    fresh = LinearStructure(rms[0].M, rms[0].K, damping_ratio=0.01)
+    assert np.array_equal(s0.M, fresh.M) and np.array_equal(s0.K, fresh.K)
+    s1 = frf_.structure(rms[1])
+    assert s1 is not s0 and frf_.structure(rms[0]) is s0 and np.array_equal(s1.M, rms[1].M)
+    frf_.structure(rms[2])                       # evicts the least recently used: rms[1]
+    assert frf_.structure(rms[0]) is s0 and frf_.structure(rms[1]) is not s1

@@ -74,14 +74,12 @@ _STRUCTURES: list = []
 def structure(rm) -> LinearStructure:
     """The reduced linear structure; modal damping applies to the modes of the stuck assembly.
 
-    Kept for the last two reduced models (by identity; a stage's jobs share one): its
+    Kept for the two reduced models used last (by identity; a stage's jobs share one): its
     validation (symmetry, a Cholesky of M) took 0.5 s of each curve's 1.3 s set-up on the
     default model (2198 DOFs), and every curve, pass and backbone builds one."""
-    for m, s in _STRUCTURES:
-        if m is rm:
-            return s
-    s = LinearStructure(rm.M, rm.K, damping_ratio=rm.damping_ratio)
-    _STRUCTURES[:] = [(rm, s)] + _STRUCTURES[:1]
+    hit = [(m, s) for m, s in _STRUCTURES if m is rm]
+    s = hit[0][1] if hit else LinearStructure(rm.M, rm.K, damping_ratio=rm.damping_ratio)
+    _STRUCTURES[:] = [(rm, s)] + [(m, s_) for m, s_ in _STRUCTURES if m is not rm][:1]
     return s
 
 
