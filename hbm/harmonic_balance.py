@@ -432,16 +432,17 @@ class HarmonicBalance:
 
         J is formed (dense path) up to ``dense_limit``, or at any size when ``dense`` is True
         (into ``out`` when given)."""
-        k, nH = nl.size, self.nH
-        cn = (3 * nl[:, None] + np.arange(3)).ravel()
-        p = cn.size
-        P = nH * p
-        idx = self._elidx(k)
+        cn, idx = self._coords(nl)
+        P = self.nH * cn.size
         if dense or P <= self.dense_limit or self._after_fallback(P):
             J = self._dense_jacobian(omega, cn, Dg, out)
             return cn, idx, (lambda x: J @ x), J, None
         matvec, prec = self._gmres_ops(omega, nl, cn, idx, Dg)
         return cn, idx, matvec, None, prec
+
+    def _coords(self, nl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Contact coordinates (3k,) of the elements nl and their reduced-layout index (k, 3 n_H)."""
+        return (3 * nl[:, None] + np.arange(3)).ravel(), self._elidx(nl.size)
 
     def _expand(self, omega, nl, cn, idx, Dg, xN):
         """G (dg/dU x_N) on all contact coordinates for a reduced vector x_N."""
@@ -503,7 +504,7 @@ class HarmonicBalance:
         if nl.size == 0:
             return [r.copy() for r in rhs]
         if direct:
-            cn, idx = (3 * nl[:, None] + np.arange(3)).ravel(), self._elidx(nl.size)
+            cn, idx = self._coords(nl)
             J = self._dense_fallback(omega, nl, Dg)
         else:
             cn, idx, matvec, J, prec = self._reduced(omega, nl, Dg)
@@ -542,8 +543,7 @@ class HarmonicBalance:
         """
         k, m = nl.size, len(cols)
         P = self.nH * 3 * k
-        if k == 0 or P <= self.dense_limit or (
-                self._dense_left > 0 and P >= DENSE_FALLBACK_SIZE * self._dense_size):
+        if k == 0 or P <= self.dense_limit or self._after_fallback(P, count=False):
             return None
         self.stats["linear_solves"] += 1
         cn, idx, matvec, _, prec = self._reduced(omega, nl, Dg)
@@ -578,12 +578,14 @@ class HarmonicBalance:
         self._gmres_failed = True
         return self._reduced(omega, nl, Dg, dense=True, out=out)[3]
 
-    def _after_fallback(self, P: int) -> bool:
+    def _after_fallback(self, P: int, count: bool = True) -> bool:
         """True for a system solved directly by LU because GMRES failed on two in a row, about
-        as large, shortly before (``DENSE_AFTER_FALLBACK``)."""
+        as large, shortly before (``DENSE_AFTER_FALLBACK``); ``count``: the system is solved so
+        now (once per system)."""
         if self._dense_left > 0 and P >= DENSE_FALLBACK_SIZE * self._dense_size:
-            self._dense_left -= 1
-            self.stats["dense_after_fallback"] += 1
+            if count:
+                self._dense_left -= 1
+                self.stats["dense_after_fallback"] += 1
             return True
         return False
 
