@@ -428,7 +428,7 @@ class NonlinearModeProblem:
             # step needs (inexact Newton, harmonic_balance.KRYLOV_FORCING) the stiff layer
             # joint's backbone took 455 residuals instead of 359 and 184 s instead of 150 s
             # (session 11), near its kinks
-            dU, dw, dxi = self._step(U, w, nl, Dg, R, r, (dRw, dSw), (dRx, dSx), a, sU, phi)
+            dU, dw, dxi = self._step(w, nl, Dg, R, r, (dRw, dSw), (dRx, dSx), a, sU, phi)
             alpha = 1.0
             for _ in range(12):
                 Ut, wt, xt = U + alpha * dU, w + alpha * dw, xi + alpha * dxi
@@ -449,7 +449,7 @@ class NonlinearModeProblem:
         raise ConvergenceError(f"EPMC Newton did not converge at modal amplitude {a:.6g}",
                                min(phi, best[0]))
 
-    def _step(self, U, w, nl, Dg, R, r, dw_terms, dxi_terms, a, sU, phi):
+    def _step(self, w, nl, Dg, R, r, dw_terms, dxi_terms, a, sU, phi):
         """The Newton step (dU, dw, dxi). On the GMRES path one bordered solve (the frequency and
         damping as its two borders, ``HarmonicBalance.linsolve_bordered``); else, or where it
         fails (then by the dense LU), three right-hand sides (-R, -dR/dw, -dR/dxi) and a 2 x 2

@@ -509,7 +509,7 @@ def test_bordered_step_is_the_newton_step_of_the_dense_jacobian(monkeypatch):
     R, r, g, nl, Dg = prob._eval(U, w, xi, a)
     assert nl.size == 2
     _, sU = prob._merit(R, r, U, a)
-    dU, dw, dxi = prob._step(U, w, nl, Dg, R, r, *prob._param_derivs(g, w, xi, a), a, sU, 1.0)
+    dU, dw, dxi = prob._step(w, nl, Dg, R, r, *prob._param_derivs(g, w, xi, a), a, sU, 1.0)
     assert hb.stats["dense_fallbacks"] == 0 and hb.stats["gmres_iterations"] > 0
     step = np.concatenate([dU.ravel(), [dw, dxi]])
     assert np.abs(step - ref).max() <= 1e-8 * np.abs(ref).max()
@@ -519,7 +519,7 @@ def test_bordered_step_is_the_newton_step_of_the_dense_jacobian(monkeypatch):
     def failing(*args, **kwargs):
         raise ConvergenceError("GMRES did not converge", 1.0)
     monkeypatch.setattr(prob.ep, "_krylov", failing)
-    dU, dw, dxi = prob._step(U, w, nl, Dg, R, r, *prob._param_derivs(g, w, xi, a), a, sU, 1.0)
+    dU, dw, dxi = prob._step(w, nl, Dg, R, r, *prob._param_derivs(g, w, xi, a), a, sU, 1.0)
     assert hb.stats["dense_fallbacks"] == 1
     step = np.concatenate([dU.ravel(), [dw, dxi]])
     assert np.abs(step - ref).max() <= 1e-8 * np.abs(ref).max()
