@@ -51,7 +51,7 @@ from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 from .friction import FrictionContacts, once
 from .preconditioner import PRECONDITIONERS, ElementBlockPreconditioner, TwoLevelPreconditioner
-from .structure import LinearStructure, Receptance
+from .structure import LinearStructure
 
 
 class Solution:
@@ -272,7 +272,7 @@ class HarmonicBalance:
         self.tol, self.max_iter, self.dense_limit = float(tol), int(max_iter), int(dense_limit)
         self.B = _contact_operator(c.dofs, s.n)
         self.k0 = c.base_stiffness().ravel()
-        self.G = Receptance(s, self.B, self.k0)
+        self.G = s.receptance(self.B, self.k0)
         self.ne, self.nc = c.ne, 3 * c.ne
         self._pre = None          # cached preconditioner (GMRES path)
         self._rows = None         # (G, nonlinear set, R and Psi on its coordinates)

@@ -126,6 +126,28 @@ def test_receptance_residual_flexibility_and_rigid_modes():
         assert abs(G0[0, 0].real - u_pinv) <= 1e-9 * abs(u_pinv)
 
 
+
+def test_receptances_are_kept_per_base_stiffness():
+    """A structure hands out one receptance per contact map and base stiffness (equal inputs,
+    not the same arrays), the last RECEPTANCES_KEPT of them; a solver on a kept one gives the
+    response of a fresh one."""
+    n = 12
+    M, K = chain(n)
+    s = LinearStructure(M, K, 0.002 * K, n_modes=4)
+    dofs = np.array([[[3, -1, -1], [7, -1, -1]], [[5, -1, -1], [-1, -1, -1]]])
+    B = _contact_operator(dofs, n)
+    k0 = np.array([30.0, 0, 0, 0, 0, 0])
+    G = s.receptance(B, k0)
+    assert s.receptance(_contact_operator(dofs.copy(), n), k0.copy()) is G
+    other = s.receptance(B, 2 * k0)
+    assert other is not G and abs(other.matrix(1, 2.0)[0, 0] - G.matrix(1, 2.0)[0, 0]) > 1e-6
+    for j in range(1, s.RECEPTANCES_KEPT):       # G falls out after RECEPTANCES_KEPT others
+        s.receptance(B, (2 + j) * k0)
+    assert s.receptance(B, k0) is not G
+    fresh = Receptance(s, B, k0)
+    assert np.abs(s.receptance(B, k0).matrix(1, 2.0) - fresh.matrix(1, 2.0)).max() == 0.0
+
+
 def test_krylov_path_matches_direct():
     n = 30
     M, K = chain(n, free=True)
