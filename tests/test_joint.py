@@ -64,6 +64,34 @@ def test_stuck_modes_kept_only_for_the_same_inputs() -> None:
     assert c is not a and c.frequency == pytest.approx(a.frequency, rel=1e-12)
 
 
+
+@pytest.mark.parametrize("n", [30, 400])
+def test_lowest_modes_of_a_free_free_chain(n: int) -> None:
+    """lowest_modes (Lanczos above LANCZOS_MIN_DOFS, dense eigh below) gives the analytic
+    spectrum of a free-free chain of equal masses and springs, lambda_j = 4 k/m sin²(j pi / 2n),
+    the rigid mode at 0, and M-orthonormal modes."""
+    from fe_joint.model.reduced_model import LANCZOS_MIN_DOFS, lowest_modes
+    k, m = 3.0e4, 2.0e-3
+    K = np.zeros((n, n))
+    i = np.arange(n - 1)
+    K[i, i] += k
+    K[i + 1, i + 1] += k
+    K[i, i + 1] -= k
+    K[i + 1, i] -= k
+    M = m * np.eye(n)
+    M[0, 1] = M[1, 0] = 0.1 * m                       # not diagonal: a generalized problem
+    lam, phi = lowest_modes(K, M, 8)
+    assert (n >= LANCZOS_MIN_DOFS) == (n == 400)
+    ref = np.linalg.eigvalsh(np.linalg.solve(np.linalg.cholesky(M), np.linalg.solve(
+        np.linalg.cholesky(M), K).T))[:8]            # L^-1 K L^-T: symmetric
+    assert abs(lam[0]) <= 1e-9 * lam[1]
+    assert np.allclose(lam[1:], ref[1:], rtol=1e-10)
+    assert np.allclose(phi.T @ M @ phi, np.eye(8), atol=1e-10)
+    assert np.linalg.norm(K @ phi - M @ phi * lam) <= 1e-8 * np.linalg.norm(K @ phi)
+    # equal masses (M[0, 1] aside): close to the analytic chain spectrum
+    j = np.arange(1, 8)
+    assert np.allclose(lam[1:], 4 * k / m * np.sin(j * np.pi / (2 * n)) ** 2, rtol=0.2)
+
 def test_slip_onset_single_element() -> None:
     """One element: onset = macroslip = μN0 / (kt A |u_t| per N) with the resonant amplitude."""
     M, K, pd = _two_blocks()

@@ -13,9 +13,8 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sla
 
-from .reduced_model import add_pair_springs
+from .reduced_model import add_pair_springs, lowest_modes
 
 
 @dataclass
@@ -140,7 +139,7 @@ def _stuck_modes(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: Joi
                  n_modes: int) -> LinearJoint:
     Ks = stuck_stiffness(K, pair_dofs, joint)
     n = Ks.shape[0]
-    w2, phi = sla.eigh(Ks, M, subset_by_index=[0, min(n_modes, n) - 1])
+    w2, phi = lowest_modes(Ks, M, min(n_modes, n))
     f = np.sqrt(np.clip(w2, 0, None)) / (2 * np.pi)
     elastic = np.nonzero(f > 1e-4 * f[-1] + 1.0)[0]
     if len(elastic) == 0:
