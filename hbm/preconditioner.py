@@ -205,7 +205,7 @@ class ElementBlockPreconditioner:
                 G[:, :, b, :, a], G[:, :, b, :, b] = -Gh.imag, Gh.real
         A = G.reshape(k, 3 * nH, 3 * nH) @ Dg
         A[:, np.arange(3 * nH), np.arange(3 * nH)] += 1.0
-        self.inv = np.linalg.inv(A)
+        self.inv = _block_inverses(A)
         # reduced-layout index (h p + 3e + d) of element-layout entry (e, d n_H + h)
         d, hh = np.divmod(np.arange(3 * nH), nH)
         self.idx = hh[None, :] * p + 3 * e[:, None] + d[None, :]
@@ -214,6 +214,26 @@ class ElementBlockPreconditioner:
         """Approximate J^-1 x for x (n_H p,) in the reduced layout."""
         out = np.empty_like(x)
         out[self.idx] = np.einsum("kab,kb->ka", self.inv, x[self.idx])
+        return out
+
+
+def _block_inverses(A: np.ndarray) -> np.ndarray:
+    """Inverses of the blocks A (k, n, n); a singular block's is the identity.
+
+    An element's own block can be singular although J is not (the elastic coupling to the other
+    elements makes up for it): the stiff layer joint's backbone on a quick-preset model met one
+    (session 14), and numpy's batched inverse then raised through the whole study. Such an
+    element is left unpreconditioned; GMRES sees the rest preconditioned as before.
+    """
+    try:
+        return np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        out = np.empty_like(A)
+        for e in range(A.shape[0]):           # the rare failure path only
+            try:
+                out[e] = np.linalg.inv(A[e])
+            except np.linalg.LinAlgError:
+                out[e] = np.eye(A.shape[1])
         return out
 
 

@@ -192,6 +192,30 @@ def test_element_blocks_invert_a_jacobian_without_coupling_between_elements():
         assert np.linalg.norm(two(J @ X[:, 0]) - X[:, 0]) <= 1e-10 * np.linalg.norm(X[:, 0])
 
 
+def test_an_element_whose_own_block_is_singular_is_left_unpreconditioned():
+    """An element block I + G_ee D_e that is singular (here D_e = -G_ee^-1 on every harmonic)
+    gets the identity; the other elements keep their exact inverses."""
+    from hbm.preconditioner import ElementBlockPreconditioner
+    rng = np.random.default_rng(7)
+    H, k = 1, 4
+    nH, p = 2 * H + 1, 12
+    R = np.zeros((p, p))
+    for e in range(k):
+        B = rng.normal(size=(3, 3))
+        R[3 * e:3 * e + 3, 3 * e:3 * e + 3] = 1e-3 * (B @ B.T + 3 * np.eye(3))
+    Psi = np.zeros((p, 1))
+    Ls = [np.zeros(1)] + [np.zeros(1, complex)] * H
+    Dg = rng.normal(scale=300.0, size=(k, 3 * nH, 3 * nH))
+    bad = 2
+    Dg[bad] = -np.kron(np.linalg.inv(R[3 * bad:3 * bad + 3, 3 * bad:3 * bad + 3]), np.eye(nH))
+    E = ElementBlockPreconditioner(R, Psi, Ls, Dg)
+    assert np.array_equal(E.inv[bad], np.eye(3 * nH))
+    G = np.kron(np.eye(nH), R)
+    J = np.eye(nH * p) + G @ _element_layout_matrix(Dg, k, nH)
+    x = rng.normal(size=nH * p)
+    x[E.idx[bad]] = 0.0                    # the well-posed elements' part: inverted exactly
+    assert np.linalg.norm(E(J @ x) - x) <= 1e-10 * np.linalg.norm(x)
+
 def test_element_and_two_level_preconditioners_solve_the_same_systems():
     # the GMRES path with each preconditioner gives the dense LU's solution of a chain with
     # friction elements, and the two-level one needs fewer iterations than the averaged one
