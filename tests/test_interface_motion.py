@@ -34,6 +34,18 @@ def test_antisymmetric_stretch_is_deformation_that_cancels_in_the_mean() -> None
     assert im.mean_over_rms[0] == pytest.approx(0.0, abs=1e-12)
 
 
+def test_mean_over_rms_does_not_depend_on_the_modes_sign() -> None:
+    """A uniform slide plus a stretch: |mean u_x| / rms u_x = c / sqrt(c² + ε² <x²>), the same for
+    the field and its negative (a mode's sign is arbitrary)."""
+    xyz, area = _grid()
+    u = np.zeros_like(xyz)
+    c, eps = 2e-4, 1e-5
+    u[:, 0] = c + eps * xyz[:, 0]
+    x2 = np.sum(area * xyz[:, 0] ** 2) / area.sum()
+    expect = c / np.sqrt(c**2 + eps**2 * x2)
+    for sign in (1.0, -1.0):
+        assert decompose(sign * u, xyz, area).mean_over_rms[0] == pytest.approx(expect, rel=1e-12)
+
 def test_relative_motion_rotates_local_components_to_global() -> None:
     phi = np.arange(12.0)
     pair_dofs = np.array([[[0, 1, 2], [3, 4, 5]], [[6, 7, 8], [9, 10, 11]]])

@@ -25,8 +25,8 @@ class InterfaceMotion:
     Attributes:
         rigid: (6,) shares of the rigid motions named in ``RIGID_NAMES``.
         deformation: (3,) shares of the non-rigid remainder in x, y, z.
-        mean_over_rms: (3,) area mean of u_x, u_y, u_z over their area rms (0: the motion cancels
-            over the interface, 1: uniform).
+        mean_over_rms: (3,) |area mean| of u_x, u_y, u_z over their area rms (0: the motion
+            cancels over the interface, 1: uniform; the magnitude: a mode's sign is arbitrary).
     """
     rigid: np.ndarray
     deformation: np.ndarray
@@ -80,6 +80,8 @@ def decompose(u: np.ndarray, xyz: np.ndarray, area: np.ndarray) -> InterfaceMoti
     rest = u - parts.sum(axis=2)
     deformation = np.sum(area[:, None] * rest**2, axis=0) / total
     rms = np.sqrt(np.sum(area[:, None] * u**2, axis=0) / area.sum())
-    mean = np.sum(area[:, None] * u, axis=0) / area.sum()
+    # |mean|: a mode's sign is arbitrary (LAPACK's eigh and ARPACK's Lanczos return the same
+    # stuck mode with opposite signs), so only the magnitude says how uniform the motion is
+    mean = np.abs(np.sum(area[:, None] * u, axis=0)) / area.sum()
     return InterfaceMotion(rigid=rigid, deformation=deformation,
                            mean_over_rms=np.divide(mean, rms, out=np.zeros(3), where=rms > 0))
