@@ -6,6 +6,8 @@ import dataclasses
 import json
 from types import SimpleNamespace
 
+import time
+
 import numpy as np
 import pytest
 
@@ -141,12 +143,14 @@ def test_failed_fast_sweep_is_retried_with_strict_tolerances(monkeypatch) -> Non
     def flaky(*args):
         tols.append(args[-1])
         if len(tols) == 1:
+            time.sleep(0.5)                  # the failed fast sweep's time
             raise SweepIncomplete("lost at a fold")
         return real(*args)
     monkeypatch.setattr(dyn, "_sweep", flaky)
     cr = frf(rm, _joint(2e3), 2.0, f, SETTINGS)
     assert tols == list(dyn.SWEEP_TOLERANCES) and tols[1] == (1e-9, 1e-11)
     assert cr.peak_hz == pytest.approx(ref.peak_hz, rel=2e-5)   # strict vs fast: same peak
+    assert cr.seconds >= 0.5                 # the curve's time counts the failed sweep too
 
     def broken(*args):
         raise SweepIncomplete("lost at a fold")
