@@ -166,6 +166,18 @@ def _element_layout_matrix(Dg: np.ndarray, k: int, nH: int) -> np.ndarray:
     return D
 
 
+def _uncoupled_elements(rng, k: int, H: int):
+    """(R, Psi, Ls, Dg) of k elements without coupling: a static flexibility block-diagonal over
+    the elements (SPD 3 x 3 blocks), no modes, random friction Jacobians."""
+    nH, p = 2 * H + 1, 3 * k
+    R = np.zeros((p, p))
+    for e in range(k):
+        B = rng.normal(size=(3, 3))
+        R[3 * e:3 * e + 3, 3 * e:3 * e + 3] = 1e-3 * (B @ B.T + 3 * np.eye(3))
+    Ls = [np.zeros(1)] + [np.zeros(1, complex)] * H
+    return R, np.zeros((p, 1)), Ls, rng.normal(scale=300.0, size=(k, 3 * nH, 3 * nH))
+
+
 def test_element_blocks_invert_a_jacobian_without_coupling_between_elements():
     # a receptance without modes and with a static flexibility block-diagonal over the elements:
     # J = I + G D has no block outside the elements', and the element blocks are its inverse;
@@ -175,13 +187,7 @@ def test_element_blocks_invert_a_jacobian_without_coupling_between_elements():
     for H in (1, 3):
         k, nH = 5, 2 * H + 1
         p = 3 * k
-        R = np.zeros((p, p))
-        for e in range(k):
-            B = rng.normal(size=(3, 3))
-            R[3 * e:3 * e + 3, 3 * e:3 * e + 3] = 1e-3 * (B @ B.T + 3 * np.eye(3))
-        Psi = np.zeros((p, 1))
-        Ls = [np.zeros(1)] + [np.zeros(1, complex)] * H
-        Dg = rng.normal(scale=300.0, size=(k, 3 * nH, 3 * nH))
+        R, Psi, Ls, Dg = _uncoupled_elements(rng, k, H)
         G = np.kron(np.eye(nH), R)
         J = np.eye(nH * p) + G @ _element_layout_matrix(Dg, k, nH)
         E = ElementBlockPreconditioner(R, Psi, Ls, Dg)
@@ -199,13 +205,7 @@ def test_an_element_whose_own_block_is_singular_is_left_unpreconditioned():
     rng = np.random.default_rng(7)
     H, k = 1, 4
     nH, p = 2 * H + 1, 12
-    R = np.zeros((p, p))
-    for e in range(k):
-        B = rng.normal(size=(3, 3))
-        R[3 * e:3 * e + 3, 3 * e:3 * e + 3] = 1e-3 * (B @ B.T + 3 * np.eye(3))
-    Psi = np.zeros((p, 1))
-    Ls = [np.zeros(1)] + [np.zeros(1, complex)] * H
-    Dg = rng.normal(scale=300.0, size=(k, 3 * nH, 3 * nH))
+    R, Psi, Ls, Dg = _uncoupled_elements(rng, k, H)
     bad = 2
     Dg[bad] = -np.kron(np.linalg.inv(R[3 * bad:3 * bad + 3, 3 * bad:3 * bad + 3]), np.eye(nH))
     E = ElementBlockPreconditioner(R, Psi, Ls, Dg)
