@@ -65,6 +65,16 @@ SHARP_TURN = 0.9
 #: iterations, 134 of 590 and 144 of 626 in all, their line searches failing from the 2nd-5th
 #: on; of the 291 correctors that converged, 3 had damped a step at all.
 CORRECTOR_STALLS = 2
+#: the corrector also gives up when its residual, still above SLOW_ABOVE times the tolerance,
+#: fell by less than the factor SLOW_RATIO in SLOW_STEPS iterations in a row: Newton has lost its
+#: convergence (where no point lies on the hyperplane it creeps). On the default model's
+#: top-level sweeps (issue 16, session 14) every failed corrector had crept so from its 2nd or
+#: 3rd iteration (ratios 0.86-0.99 at 100-10000 times the tolerance) and went on for 4-11
+#: iterations (2-3 s at 350 elements); of the 570 correctors that converged none had two such
+#: iterations in a row, on the quick model 8 of 763 had (then converged after 6-12 iterations)
+SLOW_RATIO = 0.7
+SLOW_STEPS = 2
+SLOW_ABOVE = 10.0
 #: how many segments of the branch before the current point a new point is checked against
 #: (``_Branch._retraces``)
 RETRACE_SEGMENTS = 8
@@ -312,20 +322,25 @@ def _correct(hb, force: np.ndarray, sc: _Scaling, Yp: np.ndarray, t: np.ndarray,
         max_corrector: iteration limit.
 
     Returns:
-        _Correction; ``ok`` False if the limit is reached, a step would make w <= 0, or the
-        ``CORRECTOR_STALLS``-th line search finds no decrease (the last iterate is returned: the
-        corner a restart starts from).
+        _Correction; ``ok`` False if the limit is reached, a step would make w <= 0, the
+        ``CORRECTOR_STALLS``-th line search finds no decrease, or the residual creeps
+        (``SLOW_RATIO``, ``SLOW_STEPS``) (the last iterate is returned: the corner a restart
+        starts from).
     """
     U, w = sc.unscale(Yp)
     try:
         ev = _evaluate(hb, force, U, w)
     except CycleNotClosed:
         return _Correction(False, U, w, None, 0)      # the predictor is too far: shorter step
-    step, stalls = np.inf, 0
+    step, stalls, slow, r_prev = np.inf, 0, 0, np.inf
     for it in range(1, max_corrector + 1):
         r = np.linalg.norm(ev.R)
         if it > 1 and hb.converged(r, ev.scale, step):
             return _Correction(True, U, w, ev, it)
+        slow = slow + 1 if r > SLOW_ABOVE * hb.tol * ev.scale and r > SLOW_RATIO * r_prev else 0
+        if slow >= SLOW_STEPS:
+            return _Correction(False, U, w, ev, it)
+        r_prev = r
         Rw = hb.r_omega(w, force, ev.g)
         cval = t @ (sc.Y(U, w) - Yp)
         tU, tw = sc.border(t)

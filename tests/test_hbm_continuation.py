@@ -272,8 +272,9 @@ def test_a_stalled_corrector_gives_up_early(monkeypatch):
     """The inclined contact's branch on the GMRES path: a corrector that meets no point on its
     hyperplane (corner folds) gives up at its CORRECTOR_STALLS-th line search without decrease,
     not after max_corrector iterations, and every corrector that converged got there with at
-    most one such line search."""
+    most one such line search (the creeping rule, tested below, off)."""
     import hbm.continuation as cont
+    monkeypatch.setattr(cont, "SLOW_STEPS", 10**6)
     runs = []
     search, correct = cont._line_search, cont._correct
 
@@ -300,6 +301,61 @@ def test_a_stalled_corrector_gives_up_early(monkeypatch):
     assert all(corr.it < settings.max_corrector and not ls[-1] for corr, ls in stalled)
     assert all(ls.count(False) < cont.CORRECTOR_STALLS for corr, ls in runs if corr.ok)
 
+
+def _inclined_branch(monkeypatch, slow_steps: int):
+    """The inclined contact's branch on the GMRES path with the creeping rule's SLOW_STEPS set:
+    (FRFResult, [(converged?, iterations, [(||R||, tolerance) per iteration])] per corrector)."""
+    import hbm.continuation as cont
+    monkeypatch.setattr(cont, "SLOW_STEPS", slow_steps)
+    runs, norms = [], []
+    correct, converged = cont._correct, HarmonicBalance.converged
+
+    def conv(hb, r, scale, step):         # called once per iteration from the 2nd on
+        norms.append((r, scale * hb.tol))
+        return converged(hb, r, scale, step)
+
+    def recording(*args):
+        norms.clear()
+        out = correct(*args)
+        runs.append((out.ok, out.it, list(norms)))
+        return out
+    monkeypatch.setattr(HarmonicBalance, "converged", conv)
+    monkeypatch.setattr(cont, "_correct", recording)
+    s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
+    c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
+    settings = cont.ContinuationSettings(stability="none")
+    frf = ForcedPath(s, c, lambda w: True, harmonics=1, samples=32).frf(0.4, 2.5, np.array([0.4]),
+                                                                       dof=0, settings=settings)
+    return frf, runs
+
+
+def test_a_creeping_corrector_gives_up_early(monkeypatch):
+    """A corrector whose residual, above SLOW_ABOVE x the tolerance, falls by less than
+    SLOW_RATIO in SLOW_STEPS iterations in a row gives up there: the inclined contact's branch
+    reaches the band end with fewer corrector iterations than without the rule, the correctors
+    that stopped so had crept (from the recorded residuals), and none that converged had."""
+    import hbm.continuation as cont
+    off, runs_off = _inclined_branch(monkeypatch, 10**6)
+    on, runs_on = _inclined_branch(monkeypatch, 2)
+    assert on.omega[-1] == off.omega[-1] == 2.5
+
+    def creeping(norms):
+        """Iterations (from the 2nd) at which the last SLOW_STEPS residual ratios crept."""
+        r = [n for n, _ in norms]
+        out = []
+        for i in range(len(r)):
+            ok = [j >= 1 and r[j] > cont.SLOW_ABOVE * norms[j][1] and r[j] > cont.SLOW_RATIO * r[j - 1]
+                  for j in range(i - 1, i + 1)]
+            if all(ok):
+                out.append(i)
+        return out
+    slow = [(it, norms) for ok, it, norms in runs_on if not ok and creeping(norms)]
+    assert len(slow) >= 2
+    # a creeping corrector stops at the first iteration where the rule holds
+    assert all(creeping(norms)[0] == len(norms) - 1 for it, norms in slow)
+    assert not any(creeping(norms) for ok, it, norms in runs_on if ok)
+    failed_its = [sum(it for ok, it, _ in runs if not ok) for runs in (runs_off, runs_on)]
+    assert failed_its[1] < failed_its[0]
 
 class FlakyContacts(FrictionContacts):
     """Contacts whose march 'does not close' at every ``every``-th new point (as an element far
