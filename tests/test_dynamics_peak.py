@@ -239,6 +239,50 @@ def test_a_stalled_tight_solve_gives_its_best_iterate_without_looser_solves(monk
     assert calls["stalled"] >= 3 and calls["looser"] == 0
 
 
+def test_a_top_with_kinks_is_searched_at_the_kink_tolerances(monkeypatch) -> None:
+    """Where the peak search's tight solves stall above hbm's strict tolerance (kinks of the
+    sampled friction law), after KINK_POINTS such points the rest are solved at KINK_TOLERANCES
+    only: no further tight solve is tried. The peak is the same as without stalls, to what those
+    tolerances allow."""
+    import copy
+
+    from hbm import ConvergenceError, HarmonicBalance
+    from fe_joint.study import frf as F
+    rm = _two_grounded_masses()
+    joint = _joint(2e3)
+    ref, _ = _sweep(rm, joint, 2.0)
+    solve = HarmonicBalance.solve
+    calls = {"tight": 0, "kink": 0, "in_peak": False}
+    refine = F._refine_peak
+
+    def in_peak(*a, **kw):
+        calls["in_peak"] = True
+        try:
+            return refine(*a, **kw)
+        finally:
+            calls["in_peak"] = False
+
+    def kinked(self, omega, force, guess=None):
+        if not calls["in_peak"]:
+            return solve(self, omega, force, guess)
+        if (self.tol, self.krylov_tol) == F.KINK_TOLERANCES:
+            calls["kink"] += 1
+            return solve(self, omega, force, guess)
+        calls["tight"] += 1
+        best = copy.copy(solve(self, omega, force, guess))
+        best.residual = 1e-8             # a stall above the strict tolerance, below the kink one
+        raise ConvergenceError("Newton stalled (test)", best.residual, best=best)
+    monkeypatch.setattr(F, "_refine_peak", in_peak)
+    monkeypatch.setattr(HarmonicBalance, "solve", kinked)
+    got, _ = _sweep(rm, joint, 2.0)
+    assert calls["tight"] == F.KINK_POINTS and calls["kink"] >= 10
+    # this top is smooth and flat (X″ω²/X ≈ −400): with amplitudes exact to ε ≈ 1e-7 the golden
+    # section stops within √(2ε/400) ≈ 2e-5 of the maximum (measured 1.0e-6), the amplitude
+    # within ε of it (measured 5.8e-8 above: a noisy sample)
+    assert got.peak_hz == pytest.approx(ref.peak_hz, rel=2e-5)
+    assert got.peak_amplitude == pytest.approx(ref.peak_amplitude, rel=2e-7)
+
+
 def test_speed_tables_measure_the_frf_peak() -> None:
     """The harmonics/samples speed-against-error rows are the FRF peak (a local peak search from
     the reference peak, which a short sweep through it finds, speed_error.PEAK_BAND), not a
