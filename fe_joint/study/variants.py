@@ -34,10 +34,12 @@ def stuck_frequency(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: 
     """The stuck breathing-mode frequency (Hz) by one shift-and-invert solve near ``f_guess``.
 
     The same mode as :func:`~fe_joint.model.joint.stuck_modes` (the first elastic one) at a
-    fraction of its cost (one LU instead of a dense tridiagonalisation): the three eigenvalues
-    nearest σ = (2π f_guess)² are the breathing mode and rigid-body modes as long as f_guess is
-    closer to the breathing mode than the next elastic mode is (on the resonator 245 vs 544 Hz;
-    the realizations move it by < 1 %).
+    fraction of its cost (one LU instead of a dense tridiagonalisation): the eigenvalue nearest
+    σ = (2π f_guess)² is the breathing mode's as long as f_guess is nearer to it than to the
+    rigid-body modes (0) and the next elastic mode (on the resonator 245 vs 544 Hz; the
+    realizations move it by < 1 %). One eigenvalue, not three: three of them included part of
+    the six-fold rigid-body cluster, and ARPACK took ≈ 200 iterations to resolve it (9.3 of the
+    contact stage's 23 s, serially; issue 16, session 15).
 
     Args:
         K, M: (n, n) reduced stiffness (N/mm) without the joint and mass (t).
@@ -54,13 +56,12 @@ def stuck_frequency(K: np.ndarray, M: np.ndarray, pair_dofs: np.ndarray, joint: 
     op = LinearOperator((n, n), matvec=lambda x: sla.lu_solve(lu, x), dtype=float)
     # a fixed start vector: ARPACK's default is random from a generator whose state is the
     # process's history, which moved the frequency by 1 ulp between two runs of one case
-    w2 = eigsh(Ks, k=3, M=M, sigma=sigma, OPinv=op, which="LM", return_eigenvectors=False,
+    w2 = eigsh(Ks, k=1, M=M, sigma=sigma, OPinv=op, which="LM", return_eigenvectors=False,
                v0=np.ones(n))
-    f = np.sqrt(np.clip(np.sort(w2), 0, None)) / (2 * np.pi)
-    elastic = f[f > 1e-4 * f[-1] + 1.0]
-    if len(elastic) == 0:
+    f = float(np.sqrt(max(w2[0], 0.0)) / (2 * np.pi))
+    if not f > 1e-2 * f_guess:
         raise ValueError("stuck joint: no elastic mode near the shift")
-    return float(elastic[0])
+    return f
 
 
 def joint_numbers(setup: InterfaceSetup, rm, sc: SurfaceContact, hardness: float,
