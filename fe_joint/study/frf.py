@@ -164,17 +164,16 @@ def frf(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSettin
 
 
 #: Tolerances of the FRF sweeps: (Newton, GMRES) relative; first the fast pair, then hbm's defaults.
-#: The sweep's points only draw the curve and bracket its top: the peak itself is found by the
-#: search at PEAK_TOLERANCES (``_refine_peak``), and the tangent's GMRES stays at 1e-8. A Newton
-#: tolerance of 1e-7 took ≈ 20 % less time than the strict pair; 1e-6 (issue 16, sessions 14-15)
-#: another 9-20 % on the default model's curves (smooth-ms@L2 76.0 → 60.9 s, baseline@L1 19.6 →
-#: 16.6 s; 15-30 % fewer GMRES iterations: a point converges in one Newton iteration fewer), the
-#: peaks within 1e-7 there. On the quick preset's bumpy tops (H = 1, 32 samples: several maxima
-#: within 1e-4 in amplitude over 3e-4 in frequency, README "Known limitations") the search may
-#: start next to another of them than at 1e-7. The fast pair once made the continuation lose its
-#: direction at a fold (v1's top-level curve retraced its branch below the band); a sweep that
-#: fails with it is therefore rerun with the strict pair before the failure is reported.
-SWEEP_TOLERANCES = ((1e-6, 1e-8), (1e-9, 1e-11))
+#: The fast pair takes ≈ 20 % less time on the resonator's curves (fewer Newton iterations, 25–35 %
+#: fewer GMRES iterations) and moves the polished peaks by ≈ 2e-5 in frequency and 1e-6 in
+#: amplitude, far below the v3 tolerance (1e-3). It once made the continuation lose its direction
+#: at a fold (v1's top-level curve retraced its branch below the band); a sweep that fails with
+#: it is therefore rerun with the strict pair before the failure is reported. Newton 1e-6 was
+#: 9-20 % faster again on the default model's curves, but on a quick-preset model the top-level
+#: smooth-ms sweep then sat at a corner fold for 550 points of steps 1e-5 ... 1e-4 whose tangents
+#: flipped back and forth (311 sign LUs) until it failed: 217 s instead of 14 s (issue 16,
+#: session 15; a corrector tolerance of 1e-3 times the step brought it to 39 s, still failing).
+SWEEP_TOLERANCES = ((1e-7, 1e-8), (1e-9, 1e-11))
 
 
 def _setup(rm, joint: JointModel, level: float, settings: SweepSettings,
