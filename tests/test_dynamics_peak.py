@@ -197,31 +197,42 @@ def test_refined_peak_does_not_depend_on_a_failed_strict_solve(monkeypatch) -> N
     assert calls["failed"] >= 3
 
 
+def _in_peak_search(monkeypatch, fake) -> None:
+    """Replace ``HarmonicBalance.solve`` by ``fake(hb, omega, force, guess, solve)`` (``solve``
+    the real one) inside ``frf._refine_peak`` only; elsewhere the real solve runs."""
+    from hbm import HarmonicBalance
+    from fe_joint.study import frf as F
+    solve, refine, inside = HarmonicBalance.solve, F._refine_peak, [False]
+
+    def in_peak(*a, **kw):
+        inside[0] = True
+        try:
+            return refine(*a, **kw)
+        finally:
+            inside[0] = False
+
+    def patched(self, omega, force, guess=None):
+        if not inside[0]:
+            return solve(self, omega, force, guess)
+        return fake(self, omega, force, guess, solve)
+    monkeypatch.setattr(F, "_refine_peak", in_peak)
+    monkeypatch.setattr(HarmonicBalance, "solve", patched)
+
+
 def test_a_stalled_tight_solve_gives_its_best_iterate_without_looser_solves(monkeypatch) -> None:
     """A tight solve of the peak search that stalls (ConvergenceError carrying Newton's best
     iterate) at an iterate meeting the sweep's tolerance gives that iterate: no looser solve is
     run from the same start (it would retrace the same iterations). Here every other tight solve
     'stalls' at its converged solution: the peak is the one without stalls, and no solve ran at
     the looser tolerances."""
-    from hbm import ConvergenceError, HarmonicBalance
+    from hbm import ConvergenceError
     from fe_joint.study import frf as F
     rm = _two_grounded_masses()
     joint = _joint(2e3)
     ref, _ = _sweep(rm, joint, 2.0)
-    solve = HarmonicBalance.solve
-    calls = {"tight": 0, "stalled": 0, "looser": 0, "in_peak": False}
-    refine = F._refine_peak
+    calls = {"tight": 0, "stalled": 0, "looser": 0}
 
-    def in_peak(*a, **kw):
-        calls["in_peak"] = True
-        try:
-            return refine(*a, **kw)
-        finally:
-            calls["in_peak"] = False
-
-    def stalling(self, omega, force, guess=None):
-        if not calls["in_peak"]:
-            return solve(self, omega, force, guess)
+    def stalling(self, omega, force, guess, solve):
         if self.tol != F.PEAK_TOLERANCES[0]:
             calls["looser"] += 1
             return solve(self, omega, force, guess)
@@ -231,8 +242,7 @@ def test_a_stalled_tight_solve_gives_its_best_iterate_without_looser_solves(monk
             calls["stalled"] += 1
             raise ConvergenceError("Newton stalled (test)", s.residual, best=s)
         return s
-    monkeypatch.setattr(F, "_refine_peak", in_peak)
-    monkeypatch.setattr(HarmonicBalance, "solve", stalling)
+    _in_peak_search(monkeypatch, stalling)
     got, _ = _sweep(rm, joint, 2.0)
     assert got.peak_hz == pytest.approx(ref.peak_hz, rel=1e-10)
     assert got.peak_amplitude == pytest.approx(ref.peak_amplitude, rel=1e-10)
@@ -246,25 +256,14 @@ def test_a_top_with_kinks_is_searched_at_the_kink_tolerances(monkeypatch) -> Non
     tolerances allow."""
     import copy
 
-    from hbm import ConvergenceError, HarmonicBalance
+    from hbm import ConvergenceError
     from fe_joint.study import frf as F
     rm = _two_grounded_masses()
     joint = _joint(2e3)
     ref, _ = _sweep(rm, joint, 2.0)
-    solve = HarmonicBalance.solve
-    calls = {"tight": 0, "kink": 0, "in_peak": False}
-    refine = F._refine_peak
+    calls = {"tight": 0, "kink": 0}
 
-    def in_peak(*a, **kw):
-        calls["in_peak"] = True
-        try:
-            return refine(*a, **kw)
-        finally:
-            calls["in_peak"] = False
-
-    def kinked(self, omega, force, guess=None):
-        if not calls["in_peak"]:
-            return solve(self, omega, force, guess)
+    def kinked(self, omega, force, guess, solve):
         if (self.tol, self.krylov_tol) == F.KINK_TOLERANCES:
             calls["kink"] += 1
             return solve(self, omega, force, guess)
@@ -272,8 +271,7 @@ def test_a_top_with_kinks_is_searched_at_the_kink_tolerances(monkeypatch) -> Non
         best = copy.copy(solve(self, omega, force, guess))
         best.residual = 1e-8             # a stall above the strict tolerance, below the kink one
         raise ConvergenceError("Newton stalled (test)", best.residual, best=best)
-    monkeypatch.setattr(F, "_refine_peak", in_peak)
-    monkeypatch.setattr(HarmonicBalance, "solve", kinked)
+    _in_peak_search(monkeypatch, kinked)
     got, _ = _sweep(rm, joint, 2.0)
     assert calls["tight"] == F.KINK_POINTS and calls["kink"] >= 10
     # this top is smooth and flat (X″ω²/X ≈ −400): with amplitudes exact to ε ≈ 1e-7 the golden

@@ -289,17 +289,23 @@ def test_a_stalled_corrector_gives_up_early(monkeypatch):
         return runs[-1][0]
     monkeypatch.setattr(cont, "_line_search", counting)
     monkeypatch.setattr(cont, "_correct", recording)
-    s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
-    c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
-    settings = cont.ContinuationSettings(stability="none")
-    frf = ForcedPath(s, c, lambda w: True, harmonics=1, samples=32).frf(0.4, 2.5, np.array([0.4]),
-                                                                       dof=0, settings=settings)
+    frf, settings = _inclined_gmres_frf()
     assert frf.omega[-1] == 2.5
     failed = [(corr, ls) for corr, ls in runs if not corr.ok]
     stalled = [(corr, ls) for corr, ls in failed if ls.count(False) == cont.CORRECTOR_STALLS]
     assert len(stalled) >= 3
     assert all(corr.it < settings.max_corrector and not ls[-1] for corr, ls in stalled)
     assert all(ls.count(False) < cont.CORRECTOR_STALLS for corr, ls in runs if corr.ok)
+
+
+def _inclined_gmres_frf():
+    """The inclined contact's FRF (ω 0.4 … 2.5, force 0.4, H = 1, 32 samples) on the GMRES path,
+    without stability: (FRFResult, its ContinuationSettings)."""
+    s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
+    c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
+    settings = ContinuationSettings(stability="none")
+    return (ForcedPath(s, c, lambda w: True, harmonics=1, samples=32).frf(
+        0.4, 2.5, np.array([0.4]), dof=0, settings=settings), settings)
 
 
 def _inclined_branch(monkeypatch, slow_steps: int):
@@ -321,11 +327,7 @@ def _inclined_branch(monkeypatch, slow_steps: int):
         return out
     monkeypatch.setattr(HarmonicBalance, "converged", conv)
     monkeypatch.setattr(cont, "_correct", recording)
-    s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
-    c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
-    settings = cont.ContinuationSettings(stability="none")
-    frf = ForcedPath(s, c, lambda w: True, harmonics=1, samples=32).frf(0.4, 2.5, np.array([0.4]),
-                                                                       dof=0, settings=settings)
+    frf, _ = _inclined_gmres_frf()
     return frf, runs
 
 
