@@ -502,12 +502,12 @@ PEAK_XTOL = 1e-9
 #: comparison of amplitudes near a maximum can tolerate; one more Newton iteration (quadratic)
 #: reaches ≈ 1e-15 there.
 PEAK_TOLERANCES = (1e-12, 1e-11)
-#: Peak search on a top with kinks: once this many of its points were kinks (the tight solve failed
-#: from its start and again from a looser solution), its later points are solved at
-#: ``KINK_TOLERANCES`` only. At a kink of the sampled friction law every tight solve stalls: on
-#: one quick-preset model's top-level baseline each point took a failed tight solve, a looser one
-#: and a failed tight one again (50-90, 12-36 and 50-90 residuals), 50 s for one search instead
-#: of 3 s (issue 16, session 15).
+#: Peak search on a top with kinks: once this many of its points were kinks (the tight solve
+#: stalled above hbm's strict tolerance, or failed again from a looser solution), its later points
+#: are solved at ``KINK_TOLERANCES`` only. At a kink of the sampled friction law every tight
+#: solve stalls: on one quick-preset model's top-level baseline each point took a failed tight
+#: solve, a looser one and a failed tight one again (50-90, 12-36 and 50-90 residuals), 50 s for
+#: one search instead of 3 s (issue 16, session 15).
 KINK_POINTS = 2
 #: Peak search: the tolerances (Newton, GMRES) of its solves on a top with kinks. The amplitudes
 #: are then exact to ≈ 1e-7, which at a corner of slopes ±3 (dX/X over dω/ω) places the maximum
