@@ -196,6 +196,19 @@ KRYLOV_ETA_MAX = 1e-2
 DENSE_AFTER_FALLBACK = 10
 DENSE_FALLBACK_SIZE = 0.9
 
+#: GMRES's Krylov space before a restart, and its restart cycles (scipy's ``maxiter``): after
+#: GMRES_MAXITER cycles GMRES has failed and the dense LU takes over. Restarted at 150, the stiff
+#: layer joint's Newton systems (6743 unknowns) lost their convergence at each restart and had
+#: reached 1e-9 ... 1e-6 of the right-hand side after 600 iterations: its backbone took 14 dense
+#: fallbacks, then DENSE_AFTER_FALLBACK sent 28 more systems to the LU (2.4 s each), 163 s in all;
+#: with 300 it took 55 s, the same points to 1e-8 (one process, issue 16, session 16). The cycles
+#: are also scipy's outer loop, where it checks the true residual after the preconditioned one
+#: met its tolerance: with 2 cycles of 300 (or one of 600) a default-model curve whose systems
+#: need < 150 iterations sent 24 (255) of them to the LU. Systems that converge within 150
+#: iterations (most on the forced curves) are solved exactly as with 150.
+GMRES_RESTART = 300
+GMRES_MAXITER = 4
+
 
 class _PreconditionerCache:
     """A preconditioner kept between GMRES solves, with the conditions of its reuse.
@@ -475,8 +488,8 @@ class HarmonicBalance:
                 it[0] += 1
             bn = float(np.linalg.norm(B[:, i]))
             rtol = self.krylov_rtol(bn, None if atol is None else atol[i])
-            x, info = spla.gmres(Aop, B[:, i], M=Mop, tol=rtol, atol=0.0, restart=150,
-                                 maxiter=4, callback=cb, callback_type="pr_norm")
+            x, info = spla.gmres(Aop, B[:, i], M=Mop, tol=rtol, atol=0.0, restart=GMRES_RESTART,
+                                 maxiter=GMRES_MAXITER, callback=cb, callback_type="pr_norm")
             self.stats["gmres_iterations"] += it[0]
             most = max(most, it[0])
             if info != 0:

@@ -201,6 +201,24 @@ def test_krylov_path_matches_direct():
             ref = direct.solve(ww, f)
             assert np.abs(ref.coefficients - sol.coefficients).max() <= 1e-9 * np.abs(ref.coefficients).max()
 
+
+def test_gmres_keeps_its_krylov_space_beyond_150_vectors():
+    # GMRES on a cyclic shift of n unknowns makes no progress before its n-th iteration (the
+    # Krylov space of b = e_0 reaches the solution e_{n-1} only then), and a restarted GMRES with
+    # a shorter space never converges: a stiff joint's Newton systems, restarted at 150, lost
+    # their convergence so and went to the dense LU (``GMRES_RESTART``)
+    from hbm.harmonic_balance import GMRES_MAXITER, GMRES_RESTART
+    M, K, C = free_free_pair()
+    hb = HarmonicBalance(LinearStructure(M, K, C), contact(0.3), harmonics=1, dense_limit=0)
+    n = 200
+    assert GMRES_RESTART >= n and GMRES_RESTART * GMRES_MAXITER >= 600
+    b = np.zeros((n, 1))
+    b[0] = 1.0
+    x = hb._krylov(lambda v: np.roll(v, 1), lambda v: v, b, n)
+    assert hb.stats["gmres_iterations"] == n
+    assert np.abs(x[:, 0] - np.eye(n)[n - 1]).max() <= 1e-10
+
+
 def test_newton_failure_raises_with_residual():
     M, K, C = free_free_pair()
     hb = HarmonicBalance(LinearStructure(M, K, C), contact(0.2), harmonics=3, max_iter=1)
