@@ -75,6 +75,21 @@ CORRECTOR_STALLS = 2
 SLOW_RATIO = 0.7
 SLOW_STEPS = 2
 SLOW_ABOVE = 10.0
+#: a branch thrashes at a fold when at least THRASH_TURNS of its last THRASH_POINTS points turned
+#: sharply (t . t_prev < SHARP_TURN) or lay beyond a corner restart, and those points got less
+#: than THRASH_PROGRESS of their path length away from where they started (scaled unknowns): it
+#: crawls to and fro through a cluster of corner folds in steps of 1e-5 … 1e-4, its tangent
+#: flipping, because its points are too inexact for the tangents (a quick-preset model's
+#: top-level smooth-ms sweep at Newton 1e-6: 550 points at 244.3 Hz, 311 sign LUs, 217 s instead
+#: of 14 s at 1e-7, issue 16). Then the branch goes back THRASH_POINTS points and on from there
+#: at ``ContinuationSettings.tight_tol`` when set (going on from the thrashing point at 1e-7, the
+#: step fell below ds_min there; from 20 points back it passed: 31 s, the peak 1e-10 from the
+#: strict sweep's). The resonator's sweeps that did not thrash (33 traced curves, sessions 12-16) had at
+#: most 7 sharp turns in 20 points, the thrashing ones 16-18; a branch with closely spaced corners
+#: (the 1-DOF inclined contact at 32 samples) has 12 in 20 at any tolerance, but moves on.
+THRASH_POINTS = 20
+THRASH_TURNS = 10
+THRASH_PROGRESS = 0.25
 #: how many segments of the branch before the current point a new point is checked against
 #: (``_Branch._retraces``)
 RETRACE_SEGMENTS = 8
@@ -99,6 +114,8 @@ class FRFResult:
         method: stability method used, "hill" or "fold-parity".
         wall_time: seconds spent.
         newton_iterations: total corrector iterations.
+        tightened_at: index of the first point solved at ``ContinuationSettings.tight_tol``
+            (the branch thrashed at a fold before it), -1 if none.
     """
 
     omega: np.ndarray
@@ -109,6 +126,7 @@ class FRFResult:
     method: str
     wall_time: float
     newton_iterations: int
+    tightened_at: int = -1
 
 
 # ---------------------------------------------------------------------------------- settings
@@ -148,6 +166,12 @@ class ContinuationSettings:
         max_damp: largest relative change of the response amplitude per step, in (0, inf) (a
             step is halved otherwise), so the response DOF's peak is resolved even in a mode the
             contacts hardly see.
+        tight_tol: None, or the (Newton, GMRES) tolerances, each in (0, 1), the branch goes on
+            with once it thrashes at a fold (:data:`THRASH_TURNS`) or its step fell below
+            ``ds_min``: the solver's ``tol`` and ``krylov_tol`` are set to them, and the branch
+            goes back :data:`THRASH_POINTS` points and on from there (step ``ds``). A fast loose
+            tolerance with a tighter one where the loose one's points are too inexact to pass a
+            corner fold.
 
     Raises:
         ValueError naming the field and its allowed range.
@@ -161,6 +185,7 @@ class ContinuationSettings:
     stability: str = "auto"
     max_domega: float | None = None
     max_damp: float = 0.1
+    tight_tol: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         def put(name, value):                 # frozen: normalized values are set once, here
@@ -174,6 +199,14 @@ class ContinuationSettings:
         if self.max_domega is not None:
             put("max_domega", _positive("max_domega", self.max_domega, finite=False, unit=" rad/s"))
         put("max_damp", _positive("max_damp", self.max_damp, finite=True))
+        if self.tight_tol is not None:
+            tt = self.tight_tol
+            if (not isinstance(tt, (tuple, list)) or len(tt) != 2
+                    or not all(isinstance(v, numbers.Real) and not isinstance(v, bool) and 0 < v < 1
+                               for v in tt)):
+                raise ValueError("ContinuationSettings.tight_tol must be None or a pair (Newton, "
+                                 f"GMRES) of tolerances in (0, 1), got {tt!r}")
+            put("tight_tol", (float(tt[0]), float(tt[1])))
         if not isinstance(self.stability, str) or self.stability not in STABILITY_METHODS:
             raise ValueError(f"ContinuationSettings.stability must be one of {'|'.join(STABILITY_METHODS)}, "
                              f"got {self.stability!r}")
@@ -438,6 +471,8 @@ class _Branch:
         self.sols, self.taus = [sol], [self.t[-1]]
         self.amp_prev = sol.amplitude(dof)
         self.amps = [self.amp_prev]
+        self.turns: list[bool] = []   # per accepted point: turned sharply or beyond a corner
+        self.tightened_at = -1
 
     def run(self, stop: Callable[[list], bool] | None) -> None:
         """Add points until max_points, the end of the range, a return below the start by more
@@ -448,6 +483,7 @@ class _Branch:
             if self._past_end():
                 break
             self.amps.append(self.amp_prev)
+            self._tighten_if_thrashing()
             if stop is not None and stop(self.amps):
                 break
 
@@ -480,6 +516,11 @@ class _Branch:
                 continue
             self.ds *= 0.5
             if plain:
+                continue
+            if self.ds < s.ds_min and self._tighten():
+                # the loose tolerance's points may be what the corner fold cannot be passed
+                # from (ContinuationSettings.tight_tol): on from the same point, at the tight one
+                self.ds = s.ds
                 continue
             if self.ds < s.ds_min:
                 res = (float(np.linalg.norm(corr.ev.R) / corr.ev.scale) if corr.ev is not None
@@ -598,14 +639,62 @@ class _Branch:
         if exact:
             self._exact_reference()           # at the previous point, so before moving on
             t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, prev, self.ref_sign, exact_sign=True)
+        self.turns.append(bool(beyond_corner or t @ prev < SHARP_TURN))
         # the reference of the next orientation: this point's sign, found or carried
         self.U, self.w, self.t, self.ref_sign = corr.U, corr.w, t, sign
-        self.sols.append(hb.make_solution(self.w, self.force, self.U, float(np.linalg.norm(ev.R) / ev.scale),
-                                          corr.it, ev.nl.size, g=ev.g,
-                                          jac=(ev.nl, ev.Dg) if self.keep_jac else None))
+        self.sols.append(self._solution(corr))
         self.amp_prev = self.sols[-1].amplitude(self.dof)
         self.taus.append(self.t[-1])
         self.ds = _adapt_step(self.ds, corr.it, self.settings.ds_max)
+
+    def _tighten_if_thrashing(self) -> None:
+        """Go on at ``settings.tight_tol`` once the branch thrashes at a fold (:data:`THRASH_TURNS`
+        of the last :data:`THRASH_POINTS` points turned sharply, and they hardly moved on); once
+        per branch."""
+        if (self.settings.tight_tol is None or self.tightened_at >= 0
+                or len(self.turns) < THRASH_POINTS or sum(self.turns[-THRASH_POINTS:]) < THRASH_TURNS):
+            return
+        ys = np.array([self.sc.Y(self.hb.from_contact(p.contact), p.omega)
+                       for p in self.sols[-THRASH_POINTS - 1:]])
+        path = float(np.linalg.norm(np.diff(ys, axis=0), axis=1).sum())
+        if np.linalg.norm(ys[-1] - ys[0]) < THRASH_PROGRESS * path:
+            self._tighten()
+
+    def _tighten(self) -> bool:
+        """Set the solver's tolerances to ``settings.tight_tol`` for the rest of the branch and go
+        back to the point THRASH_POINTS before the current one (the loose points since may be
+        what the fold cannot be passed from): solve it again at them (on the hyperplane through
+        it normal to the secant from the point before it) with its tangent, and drop the points
+        after it. False when there is no tight_tol, or it is set already."""
+        if self.settings.tight_tol is None or self.tightened_at >= 0:
+            return False
+        hb = self.hb
+        hb.tol, hb.krylov_tol = self.settings.tight_tol
+        k = max(len(self.sols) - 1 - THRASH_POINTS, 1)
+        Yk = self.sc.Y(hb.from_contact(self.sols[k].contact), self.sols[k].omega)
+        sec = Yk - self.sc.Y(hb.from_contact(self.sols[k - 1].contact), self.sols[k - 1].omega)
+        sec /= np.linalg.norm(sec)
+        corr = _correct(hb, self.force, self.sc, Yk, sec, self.settings.max_corrector)
+        if not corr.ok:
+            self.tightened_at = len(self.sols)
+            return True
+        t, sign = _tangent(hb, self.force, self.sc, corr.w, corr.ev, sec, None)
+        del self.sols[k:], self.taus[k:], self.amps[k:], self.turns[k - 1:]
+        self.U, self.w, self.t, self.ref_sign, self.t_beyond = corr.U, corr.w, t, sign, None
+        self.sols.append(self._solution(corr))
+        self.amp_prev = self.sols[-1].amplitude(self.dof)
+        self.amps.append(self.amp_prev)
+        self.taus.append(self.t[-1])
+        self.ds = self.settings.ds
+        self.tightened_at = k
+        return True
+
+    def _solution(self, corr: _Correction):
+        """The Solution of a corrected point (current tolerances)."""
+        ev = corr.ev
+        return self.hb.make_solution(corr.w, self.force, corr.U, float(np.linalg.norm(ev.R) / ev.scale),
+                                     corr.it, ev.nl.size, g=ev.g,
+                                     jac=(ev.nl, ev.Dg) if self.keep_jac else None)
 
     def _past_end(self) -> bool:
         """True if the last point is beyond w1 (then re-solved exactly at w1 when Newton manages)
@@ -626,7 +715,7 @@ class _Branch:
         turning = _turning_points(np.array(self.taus))
         stable, method = _stability(self.hb, sols, turning, self.settings.stability)
         return FRFResult(omega, amp, stable, sols, turning, method, time.perf_counter() - t_start,
-                         self.total_it)
+                         self.total_it, self.tightened_at)
 
 
 def continue_frf(hb, omega_start: float, omega_end: float, force, dof: int,

@@ -238,6 +238,35 @@ def test_gmres_path_passes_corner_folds_like_the_dense_path():
     assert np.max(np.abs(a.amplitude - b.amplitude) / a.amplitude) <= 1e-5
 
 
+def test_a_thrashing_branch_goes_on_at_the_tight_tolerance(monkeypatch):
+    """The inclined contact's branch turns sharply at closely spaced corners (12 of 20 points,
+    n_t = 32), but moves on: over such 20 points it gets at least 0.52 of their path length away
+    (any tolerance), so it does not thrash (THRASH_PROGRESS 0.25). Counted as thrashing from
+    0.6 on, it goes back THRASH_POINTS points and on from there at ``tight_tol``: every point
+    from there meets it (residuals up to 10 tol at kinks, ``HarmonicBalance.converged``), the
+    points before the loose tolerance only, and it ends where the branch traced at the tight
+    tolerance throughout ends."""
+    from hbm import continuation as cont
+    s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
+    c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
+    f, tight = np.array([0.4]), (1e-11, 1e-12)
+    hb = HarmonicBalance(s, c, harmonics=1, samples=32, tol=1e-4)
+    assert hb.frf(0.4, 2.5, f, dof=0, stability="none", tight_tol=tight).tightened_at == -1
+    assert hb.tol == 1e-4
+    ref = HarmonicBalance(s, c, harmonics=1, samples=32, tol=tight[0], krylov_tol=tight[1])
+    ref = ref.frf(0.4, 2.5, f, dof=0, stability="none")
+    monkeypatch.setattr(cont, "THRASH_PROGRESS", 0.6)
+    frf = hb.frf(0.4, 2.5, f, dof=0, stability="none", tight_tol=tight)
+    k = frf.tightened_at
+    assert cont.THRASH_POINTS <= k < len(frf.omega) - 10 and (hb.tol, hb.krylov_tol) == tight
+    res = np.array([p.residual for p in frf.solutions])
+    assert res[k:].max() <= 10 * tight[0] and res[:k].max() > 1e3 * tight[0]
+    assert frf.omega[-1] == ref.omega[-1] == 2.5
+    assert abs(frf.amplitude[-1] / ref.amplitude[-1] - 1) <= 1e-9
+    with pytest.raises(ValueError, match=r"ContinuationSettings\.tight_tol must be"):
+        ContinuationSettings(tight_tol=(1e-7, 1.0))
+
+
 def test_carried_sign_is_the_exact_sign_at_every_corner(monkeypatch):
     """The inclined contact's branch on the GMRES path: at every corner restart, the
     determinant sign carried along the branch from the last exact one equals the sign a dense

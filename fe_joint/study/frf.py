@@ -164,16 +164,19 @@ def frf(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSettin
 
 
 #: Tolerances of the FRF sweeps: (Newton, GMRES) relative; first the fast pair, then hbm's defaults.
-#: The fast pair takes ≈ 20 % less time on the resonator's curves (fewer Newton iterations, 25–35 %
-#: fewer GMRES iterations) and moves the polished peaks by ≈ 2e-5 in frequency and 1e-6 in
-#: amplitude, far below the v3 tolerance (1e-3). It once made the continuation lose its direction
-#: at a fold (v1's top-level curve retraced its branch below the band); a sweep that fails with
-#: it is therefore rerun with the strict pair before the failure is reported. Newton 1e-6 was
-#: 9-20 % faster again on the default model's curves, but on a quick-preset model the top-level
-#: smooth-ms sweep then sat at a corner fold for 550 points of steps 1e-5 ... 1e-4 whose tangents
-#: flipped back and forth (311 sign LUs) until it failed: 217 s instead of 14 s (issue 16,
-#: session 15; a corrector tolerance of 1e-3 times the step brought it to 39 s, still failing).
-SWEEP_TOLERANCES = ((1e-7, 1e-8), (1e-9, 1e-11))
+#: The fast pair takes 20-30 % less time than hbm's on the resonator's curves (fewer Newton and
+#: GMRES iterations) and moves the polished peaks by ≈ 2e-5 in frequency and 1e-6 in amplitude,
+#: far below the v3 tolerance (1e-3). It once made the continuation lose its direction at a fold
+#: (v1's top-level curve retraced its branch below the band); a sweep that fails with it is
+#: therefore rerun with the strict pair before the failure is reported. Newton 1e-6 is 9-20 %
+#: faster than 1e-7 on the default model's curves, but on a quick-preset model the top-level
+#: smooth-ms sweep at 1e-6 sat at a corner fold for 550 points whose tangents flipped back and
+#: forth (311 sign LUs, 217 s instead of 14 s at 1e-7; issue 16, session 15): a sweep that
+#: thrashes so, or whose step falls below its minimum, goes back 20 points and on from there at
+#: THRASH_TOLERANCES (``hbm.continuation.THRASH_TURNS``, ``ContinuationSettings.tight_tol``).
+SWEEP_TOLERANCES = ((1e-6, 1e-8), (1e-9, 1e-11))
+#: the fast sweep's tolerances from where it thrashes at a fold (see SWEEP_TOLERANCES)
+THRASH_TOLERANCES = (1e-7, 1e-8)
 
 
 def _setup(rm, joint: JointModel, level: float, settings: SweepSettings,
@@ -209,7 +212,10 @@ def _sweep(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSet
     hb, force, act = _setup(rm, joint, level, settings, tols)
     max_points = settings.max_points
     w0, w1 = 2 * np.pi * f_lin * settings.band[0], 2 * np.pi * f_lin * settings.band[1]
-    res = hb.frf(w0, w1, force, dof=rm.response_dof, settings=settings.continuation(w0, w1))
+    cs = settings.continuation(w0, w1)
+    if tols == SWEEP_TOLERANCES[0]:
+        cs = replace(cs, tight_tol=THRASH_TOLERANCES)
+    res = hb.frf(w0, w1, force, dof=rm.response_dof, settings=cs)
     # a branch that stops short of the band end may miss the peak: say so, never report it
     if res.omega[-1] < w1 * (1 - 1e-9):
         why = ("raise dynamics.max_points" if len(res.omega) >= max_points else
