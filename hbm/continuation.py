@@ -519,8 +519,8 @@ class _Branch:
                 continue
             if self.ds < s.ds_min and self._tighten():
                 # the loose tolerance's points may be what the corner fold cannot be passed
-                # from (ContinuationSettings.tight_tol): on from the same point, at the tight one
-                self.ds = s.ds
+                # from (ContinuationSettings.tight_tol): on from 20 points back, at the tight one
+                Y, flipped = self.sc.Y(self.U, self.w), False
                 continue
             if self.ds < s.ds_min:
                 res = (float(np.linalg.norm(corr.ev.R) / corr.ev.scale) if corr.ev is not None
@@ -673,7 +673,8 @@ class _Branch:
         k = max(len(self.sols) - 1 - THRASH_POINTS, 1)
         Yk = self.sc.Y(hb.from_contact(self.sols[k].contact), self.sols[k].omega)
         sec = Yk - self.sc.Y(hb.from_contact(self.sols[k - 1].contact), self.sols[k - 1].omega)
-        sec /= np.linalg.norm(sec)
+        norm = float(np.linalg.norm(sec))
+        sec = sec / norm if norm > 0 else self.t
         corr = _correct(hb, self.force, self.sc, Yk, sec, self.settings.max_corrector)
         if not corr.ok:
             self.tightened_at = len(self.sols)

@@ -267,6 +267,40 @@ def test_a_thrashing_branch_goes_on_at_the_tight_tolerance(monkeypatch):
         ContinuationSettings(tight_tol=(1e-7, 1.0))
 
 
+def test_a_step_below_ds_min_goes_back_and_on_at_the_tight_tolerance(monkeypatch):
+    """Where no step passes at the loose tolerance (every corrector between 1.0 and 1.02 rad/s
+    fails while the solver's tol is the loose one), the branch raises below ds_min without
+    ``tight_tol``; with it, it goes back THRASH_POINTS points, solves that point again at the
+    tight tolerance and passes, ending where the tight branch ends."""
+    from hbm import ConvergenceError
+    from hbm import continuation as cont
+    s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
+    c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
+    f, loose, tight = np.array([0.4]), 1e-4, (1e-11, 1e-12)
+    real = cont._correct
+
+    def blocked(hb, force, sc, Yp, t, max_corrector):
+        U, w = sc.unscale(Yp)
+        if hb.tol == loose and 1.0 < w < 1.02:
+            return cont._Correction(False, U, w, None, 0)
+        return real(hb, force, sc, Yp, t, max_corrector)
+    monkeypatch.setattr(cont, "_correct", blocked)
+    with pytest.raises(ConvergenceError, match="ds_min"):
+        HarmonicBalance(s, c, harmonics=1, samples=32, tol=loose).frf(0.4, 2.5, f, dof=0,
+                                                                      stability="none")
+    hb = HarmonicBalance(s, c, harmonics=1, samples=32, tol=loose)
+    frf = hb.frf(0.4, 2.5, f, dof=0, stability="none", tight_tol=tight)
+    k = frf.tightened_at
+    assert k >= 1 and frf.omega[k] < 1.0 and (hb.tol, hb.krylov_tol) == tight
+    assert np.all(frf.omega[:k] < 1.0) and np.all(np.diff(frf.omega) > 0)
+    res = np.array([p.residual for p in frf.solutions])
+    assert res[k:].max() <= 10 * tight[0] and res[:k].max() > 1e3 * tight[0]
+    ref = HarmonicBalance(s, c, harmonics=1, samples=32, tol=tight[0], krylov_tol=tight[1])
+    ref = ref.frf(0.4, 2.5, f, dof=0, stability="none")
+    assert frf.omega[-1] == ref.omega[-1] == 2.5
+    assert abs(frf.amplitude[-1] / ref.amplitude[-1] - 1) <= 1e-9
+
+
 def test_carried_sign_is_the_exact_sign_at_every_corner(monkeypatch):
     """The inclined contact's branch on the GMRES path: at every corner restart, the
     determinant sign carried along the branch from the last exact one equals the sign a dense
