@@ -369,10 +369,11 @@ def test_epmc_newton_stops_on_a_stall_near_the_solution(monkeypatch):
     converged point moved by 1e-7, with 3 % of each Newton step (the merit falls ≈ 3 % per
     iteration, every first trial accepted): with an unreachable tolerance it raises with its best
     merit after STALL_ITERATIONS iterations; with a tolerance whose stagnation floor
-    (STAGNATION_FLOOR × tol) lies above that best merit it returns the best iterate instead."""
+    (STAGNATION_FLOOR × tol) lies above that best merit it returns the best iterate instead, as
+    soon as the merit has not halved in FLOOR_STALL_ITERATIONS iterations below the floor."""
     from hbm.errors import ConvergenceError
     from hbm.harmonic_balance import STALL_BELOW, STALL_ITERATIONS
-    from hbm.nonlinear_mode import STAGNATION_FLOOR
+    from hbm.nonlinear_mode import FLOOR_STALL_ITERATIONS, STAGNATION_FLOOR
     hb = jenkins_1dof(3, 256, tol=1e-11)
     prob = NonlinearModeProblem(hb, 0, max_iter=40)
     a = 0.5
@@ -403,7 +404,17 @@ def test_epmc_newton_stops_on_a_stall_near_the_solution(monkeypatch):
     n = len(merits)
     prob.tol = 1.5 * e.value.residual / STAGNATION_FLOOR
     got = prob.solve(a, *start)
-    assert got[3] == e.value.residual and got[4] == n - 1      # the same (last, best) iterate
+    # the best iterate, once the best merit is below the floor and the merit has not halved in
+    # FLOOR_STALL_ITERATIONS iterations (the recorded merits replayed through that rule)
+    best, mark = (np.inf, 0), (np.inf, 0)
+    for i, m in enumerate(merits):
+        best = min(best, (m, i))
+        if m <= 0.5 * mark[0]:
+            mark = (m, i)
+        elif best[0] <= STAGNATION_FLOOR * prob.tol and i - mark[1] >= FLOOR_STALL_ITERATIONS:
+            break
+    assert i < n - 1 and best[0] <= STAGNATION_FLOOR * prob.tol
+    assert got[3] == best[0] and got[4] == best[1]
 
 
 def test_backbone_steps_over_one_amplitude_where_newton_fails(monkeypatch):
