@@ -131,12 +131,27 @@ def test_aitken_solves_linear_fixed_point_in_two_updates() -> None:
 
 def test_failed_fast_sweep_is_retried_with_strict_tolerances(monkeypatch) -> None:
     """A sweep that fails with the fast tolerances is rerun once with hbm's strict ones; a second
-    failure is reported, not hidden."""
+    failure is reported, not hidden. The curve records the tolerance its sweep ended at."""
     import fe_joint.study.frf as dyn
     from fe_joint.study.frf import SweepIncomplete, frf
     rm = _two_grounded_masses()
     f = stuck_modes(rm.K, rm.M, rm.pair_dofs, _joint(2e3)).frequency
     ref = frf(rm, _joint(2e3), 2.0, f, SETTINGS)
+    assert ref.sweep_tol == dyn.SWEEP_TOLERANCES[0][0] and np.isnan(ref.handover_hz)
+    # a sweep handed over to THRASH_TOLERANCES at its 4th point (as hbm's continuation does
+    # where it thrashes at a fold) records that tolerance and the point's frequency
+    real_frf, seen = dyn.HarmonicBalance.frf, []
+
+    def handed_over(hb, *args, **kwargs):
+        assert kwargs["settings"].tight_tol == dyn.THRASH_TOLERANCES
+        res = real_frf(hb, *args, **kwargs)
+        hb.tol, hb.krylov_tol = dyn.THRASH_TOLERANCES
+        seen.append(res.omega[3] / (2 * np.pi))
+        return dataclasses.replace(res, tightened_at=3)
+    with monkeypatch.context() as m:
+        m.setattr(dyn.HarmonicBalance, "frf", handed_over)
+        cr = frf(rm, _joint(2e3), 2.0, f, SETTINGS)
+    assert cr.sweep_tol == dyn.THRASH_TOLERANCES[0] and cr.handover_hz == seen[0]
     tols = []
     real = dyn._sweep
 
@@ -151,6 +166,7 @@ def test_failed_fast_sweep_is_retried_with_strict_tolerances(monkeypatch) -> Non
     assert tols == list(dyn.SWEEP_TOLERANCES) and tols[1] == (1e-9, 1e-11)
     assert cr.peak_hz == pytest.approx(ref.peak_hz, rel=2e-5)   # strict vs fast: same peak
     assert cr.seconds >= 0.5                 # the curve's time counts the failed sweep too
+    assert cr.sweep_tol == 1e-9
 
     def broken(*args):
         raise SweepIncomplete("lost at a fold")

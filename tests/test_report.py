@@ -85,7 +85,10 @@ def _curve(key: CurveKey, level: float, f0: float, rng: np.random.Generator) -> 
         q_amp=rng.uniform(0, 10, (NE, 2)), loop_u=elem_u.mean(axis=0), loop_T=50 * np.sin(phase),
         elem_u=elem_u, elem_T=5 * np.sin(phase) * np.ones((NE, 1)), seconds=1.25,
         newton_iterations=12, n_points=len(omega), n_active=int(np.sum(status < 4)),
-        n_nonlinear=int(np.sum((status > 0) & (status < 4))), **key.to_fields())
+        n_nonlinear=int(np.sum((status > 0) & (status < 4))),
+        # one curve per level handed over to a tighter tolerance at a fold (2 Hz below its peak)
+        sweep_tol=1e-7 if key.level_index == 1 else 1e-6,
+        handover_hz=float(omega[k] - 2) if key.level_index == 1 else float("nan"), **key.to_fields())
 
 
 def _manifest(folder: Path, stage: str, seconds: float, summary: dict) -> None:
@@ -254,8 +257,13 @@ def test_summary_holds_no_wall_time(report):
     assert not TIMING_KEYS & set(keys(s))
     md = (run / "report.md").read_text()
     t = json.loads((run / "timings.json").read_text())
+    handed = 0
     for name, sec in t["curves"].items():
-        assert f"| {name} | {s['peaks'][name]['n_points']} | {sec:.1f} |" in md
+        p = s["peaks"][name]
+        tol = "1e-06" if p["handover_hz"] is None else f"1e-07 from {p['peak_hz'] - 2:.2f} Hz"
+        handed += p["handover_hz"] is not None
+        assert f"| {name} | {p['n_points']} | {sec:.1f} | {tol}" in md
+    assert handed >= 1
 
 
 BLOCKED_RUN = """

@@ -165,12 +165,21 @@ def _cost(s: dict, t: dict) -> list[str]:
     """Wall time per stage and per FRF curve, s (from the timings ``t``), beside the paper's."""
     L = ["", "## Cost", "", "| stage | wall time [s] |", "|---|---|"]
     L += [f"| {k} | {v:.1f} |" for k, v in t["stages"].items()]
-    L += ["", "| FRF curve | points | wall time [s] |", "|---|---|---|"]
-    L += [f"| {k} | {v['n_points']} | {t['curves'][k]:.1f} |" for k, v in s["peaks"].items()]
+    L += ["", "| FRF curve | points | wall time [s] | sweep's Newton tolerance |", "|---|---|---|---|"]
+    L += [f"| {k} | {v['n_points']} | {t['curves'][k]:.1f} | {_sweep_tol(v)} |"
+          for k, v in s["peaks"].items()]
     L += backbones.cost_rows(s, t)
     L += ["", "The paper's FORSE curves took 13 682 s (smooth, 1000 N) and 6 957 / 6 362 / 6 031 / 5 954 s "
           "(Rq 1 / 5 / 10 / 15 µm) on a 20-core node; its BEM analyses are in its Table 3."]
     return L
+
+
+def _sweep_tol(peak: dict) -> str:
+    """The tolerance a curve's sweep ended at, and where it was tightened at a fold ("" unknown)."""
+    tol, at = peak.get("sweep_tol"), peak.get("handover_hz")
+    if tol is None:
+        return ""
+    return f"{tol:.0e}" + ("" if at is None else f" from {at:.2f} Hz (thrashed at a fold)")
 
 
 def _speed(speed: dict | None) -> list[str]:

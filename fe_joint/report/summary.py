@@ -36,11 +36,16 @@ def curve_peak(cr: CurveResult) -> dict:
         cr: the curve.
     Returns:
         level N, peak_hz Hz, peak_amplitude mm, dissipated N·mm per cycle, n_nonlinear and
-        n_active elements, n_points (its wall time is in :func:`build_timings`).
+        n_active elements, n_points (its wall time is in :func:`build_timings`), sweep_tol (the
+        Newton tolerance its sweep ended at) and handover_hz (where it went on at a tighter one
+        after thrashing at a fold, Hz), each None when unknown or none.
     """
+    def known(v: float):
+        return None if not np.isfinite(v) else float(v)
     return {"level": cr.level, "peak_hz": cr.peak_hz, "peak_amplitude": cr.peak_amplitude,
             "dissipated": cr.dissipated, "n_nonlinear": cr.n_nonlinear,
-            "n_points": cr.n_points, "n_active": cr.n_active}
+            "n_points": cr.n_points, "n_active": cr.n_active,
+            "sweep_tol": known(cr.sweep_tol), "handover_hz": known(cr.handover_hz)}
 
 
 def v3_section(data: ReportData) -> dict:

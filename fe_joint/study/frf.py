@@ -119,6 +119,11 @@ class CurveResult:
     n_nonlinear: int             # elements slipping or separating at the peak
     level_index: int = -1        # which study level (-1: the small-excitation check)
     rq_um: float = float("nan")  # Rq of the surface behind the joint, µm (NaN: none)
+    # the Newton tolerance the sweep ended at (SWEEP_TOLERANCES[0]; THRASH_TOLERANCES after a
+    # hand-over at a fold; the strict one after a rerun), and the frequency from which it went on
+    # at THRASH_TOLERANCES, Hz (NaN: no hand-over); NaN for a local branch (``peak_near``)
+    sweep_tol: float = float("nan")
+    handover_hz: float = float("nan")
 
     @property
     def key(self) -> CurveKey:
@@ -138,8 +143,10 @@ class CurveResult:
             kw = {k: d[k] for k in d.files}
         for k in ("config",):
             kw[k] = str(kw[k])
-        for k in ("level", "peak_hz", "peak_amplitude", "seconds", "rq_um"):
-            kw[k] = float(kw[k])
+        for k in ("level", "peak_hz", "peak_amplitude", "seconds", "rq_um", "sweep_tol",
+                  "handover_hz"):
+            if k in kw:          # the last two are missing from files written before them
+                kw[k] = float(kw[k])
         for k in ("newton_iterations", "n_points", "n_active", "n_nonlinear", "level_index"):
             kw[k] = int(kw[k])
         return cls(**kw)
@@ -216,6 +223,7 @@ def _sweep(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSet
     if tols == SWEEP_TOLERANCES[0]:
         cs = replace(cs, tight_tol=THRASH_TOLERANCES)
     res = hb.frf(w0, w1, force, dof=rm.response_dof, settings=cs)
+    sweep_tol = hb.tol                   # before the peak search (it restores hb.tol anyway)
     # a branch that stops short of the band end may miss the peak: say so, never report it
     if res.omega[-1] < w1 * (1 - 1e-9):
         why = ("raise dynamics.max_points" if len(res.omega) >= max_points else
@@ -247,6 +255,8 @@ def _sweep(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSet
                             _polish_peak(hb, force, rm.response_dof, branch, kb))
     cr = _curve_result(hb, rm, joint, level, act, peak_sol, res.omega, res.amplitude,
                        np.asarray(res.stable, bool), res.newton_iterations + its, t0)
+    cr = replace(cr, sweep_tol=sweep_tol, handover_hz=(
+        float(res.omega[res.tightened_at] / (2 * np.pi)) if res.tightened_at >= 0 else float("nan")))
     return cr, _full_contact(joint, act, peak_sol)
 
 
