@@ -84,9 +84,10 @@ SLOW_ABOVE = 10.0
 #: of 14 s at 1e-7, issue 16). Then the branch goes back THRASH_POINTS points and on from there
 #: at ``ContinuationSettings.tight_tol`` when set (going on from the thrashing point at 1e-7, the
 #: step fell below ds_min there; from 20 points back it passed: 31 s, the peak 1e-10 from the
-#: strict sweep's). The resonator's sweeps that did not thrash (33 traced curves, sessions 12-16) had at
-#: most 7 sharp turns in 20 points, the thrashing ones 16-18; a branch with closely spaced corners
-#: (the 1-DOF inclined contact at 32 samples) has 12 in 20 at any tolerance, but moves on.
+#: strict sweep's). The resonator's sweeps that did not thrash (33 traced curves, sessions
+#: 12-16) had at most 7 sharp turns in 20 points, the thrashing ones 16-18; a branch with closely
+#: spaced corners (the 1-DOF inclined contact at 32 samples) has 12 in 20 at any tolerance, but
+#: moves on.
 THRASH_POINTS = 20
 THRASH_TURNS = 10
 THRASH_PROGRESS = 0.25
@@ -115,7 +116,7 @@ class FRFResult:
         wall_time: seconds spent.
         newton_iterations: total corrector iterations.
         tightened_at: index of the first point solved at ``ContinuationSettings.tight_tol``
-            (the branch thrashed at a fold before it), -1 if none.
+            (the branch thrashed at a fold, or its step fell below ds_min, after it), -1 if none.
     """
 
     omega: np.ndarray
@@ -652,7 +653,7 @@ class _Branch:
         of the last :data:`THRASH_POINTS` points turned sharply, and they hardly moved on); once
         per branch."""
         if (self.settings.tight_tol is None or self.tightened_at >= 0
-                or len(self.turns) < THRASH_POINTS or sum(self.turns[-THRASH_POINTS:]) < THRASH_TURNS):
+                or sum(self.turns[-THRASH_POINTS:]) < THRASH_TURNS):
             return
         ys = np.array([self.sc.Y(self.hb.from_contact(p.contact), p.omega)
                        for p in self.sols[-THRASH_POINTS - 1:]])
@@ -670,13 +671,14 @@ class _Branch:
             return False
         hb = self.hb
         hb.tol, hb.krylov_tol = self.settings.tight_tol
+        self.ds = self.settings.ds
         k = max(len(self.sols) - 1 - THRASH_POINTS, 1)
         Yk = self.sc.Y(hb.from_contact(self.sols[k].contact), self.sols[k].omega)
         sec = Yk - self.sc.Y(hb.from_contact(self.sols[k - 1].contact), self.sols[k - 1].omega)
         norm = float(np.linalg.norm(sec))
         sec = sec / norm if norm > 0 else self.t
         corr = _correct(hb, self.force, self.sc, Yk, sec, self.settings.max_corrector)
-        if not corr.ok:
+        if not corr.ok:                 # on from the current point, at the tight tolerance
             self.tightened_at = len(self.sols)
             return True
         t, sign = _tangent(hb, self.force, self.sc, corr.w, corr.ev, sec, None)
@@ -686,7 +688,6 @@ class _Branch:
         self.amp_prev = self.sols[-1].amplitude(self.dof)
         self.amps.append(self.amp_prev)
         self.taus.append(self.t[-1])
-        self.ds = self.settings.ds
         self.tightened_at = k
         return True
 

@@ -165,7 +165,8 @@ def _cost(s: dict, t: dict) -> list[str]:
     """Wall time per stage and per FRF curve, s (from the timings ``t``), beside the paper's."""
     L = ["", "## Cost", "", "| stage | wall time [s] |", "|---|---|"]
     L += [f"| {k} | {v:.1f} |" for k, v in t["stages"].items()]
-    L += ["", "| FRF curve | points | wall time [s] | sweep's Newton tolerance |", "|---|---|---|---|"]
+    L += ["", "| FRF curve | points | wall time [s] | sweep's Newton tolerance |",
+          "|---|---|---|---|"]
     L += [f"| {k} | {v['n_points']} | {t['curves'][k]:.1f} | {_sweep_tol(v)} |"
           for k, v in s["peaks"].items()]
     L += backbones.cost_rows(s, t)

@@ -255,8 +255,9 @@ def _sweep(rm, joint: JointModel, level: float, f_lin: float, settings: SweepSet
                             _polish_peak(hb, force, rm.response_dof, branch, kb))
     cr = _curve_result(hb, rm, joint, level, act, peak_sol, res.omega, res.amplitude,
                        np.asarray(res.stable, bool), res.newton_iterations + its, t0)
-    cr = replace(cr, sweep_tol=sweep_tol, handover_hz=(
-        float(res.omega[res.tightened_at] / (2 * np.pi)) if res.tightened_at >= 0 else float("nan")))
+    at = res.tightened_at
+    cr = replace(cr, sweep_tol=sweep_tol,
+                 handover_hz=float(res.omega[at] / (2 * np.pi)) if at >= 0 else float("nan"))
     return cr, _full_contact(joint, act, peak_sol)
 
 
