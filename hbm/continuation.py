@@ -682,7 +682,8 @@ class _Branch:
             self.tightened_at = len(self.sols)
             return True
         t, sign = _tangent(hb, self.force, self.sc, corr.w, corr.ev, sec, None)
-        del self.sols[k:], self.taus[k:], self.amps[k:], self.turns[k - 1:]
+        del self.sols[k:], self.taus[k:], self.amps[k:]
+        self.turns[k - 1:] = [False]          # one per point after the first, the new one's too
         self.U, self.w, self.t, self.ref_sign, self.t_beyond = corr.U, corr.w, t, sign, None
         self.sols.append(self._solution(corr))
         self.amp_prev = self.sols[-1].amplitude(self.dof)
