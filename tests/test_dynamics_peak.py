@@ -378,7 +378,12 @@ def test_speed_rows_as_queue_jobs_give_the_sequential_tables(tmp_path) -> None:
                           samples=(16, 32), h_fixed=1),
            se.MESH_TABLE: se.mesh_rows(models, level, SETTINGS, ref.peak_hz)}
     jobs = se.speed_jobs([], knobs, len(models), (1, 32))
-    assert jobs[0] == se.SpeedJob("harmonics", 1, harmonics=3, samples=256)   # the costliest first
+    # the reference first (the harmonics and samples rows wait for it), then the coarser mesh's
+    # row (it builds its FE model), then the costliest search
+    assert jobs[:3] == [se.SpeedJob("reference", 0, harmonics=1, samples=32),
+                        se.SpeedJob("mesh", 0, model=0, builds_model=True),
+                        se.SpeedJob("harmonics", 1, harmonics=3, samples=256)]
+    assert [j.builds_model for j in jobs if j.table == "mesh"] == [True, False]
     # one search per (model, H, n_t): the case mesh's row is the reference's sweep
     searches = [(j.model if j.table == "mesh" else -1, j.harmonics or 1, j.samples or 32)
                 for j in jobs if j.table not in ("bem", "reference") and not j.peak_of]

@@ -1,4 +1,6 @@
 """Same numbers on any number of ranks: COMM_WORLD (mpirun -n 2) vs COMM_SELF in the same process."""
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 from mpi4py import MPI
@@ -79,3 +81,59 @@ def test_column_split_condensation_equals_a_superlu_schur_complement():
     assert np.abs(blocks["M_BB"] - mr).max() < 1e-9 * np.abs(mr).max()
     assert np.abs(blocks["M_PB"] - phi.T @ mi).max() < 1e-9 * np.abs(phi.T @ mi).max()
     cond.destroy()
+
+
+@dataclass(frozen=True)
+class _Build:
+    """A job of the queue (sent to another rank: a module-level class pickles)."""
+    name: str
+
+
+@pytest.mark.mpi
+def test_serial_builds_inside_the_job_queue_equal_one_outside(tmp_path) -> None:
+    """The speed stage builds its coarser FE models inside its job queue, each on the rank that
+    runs the job (COMM_SELF), while rank 0's server thread deals the jobs over COMM_WORLD: every
+    build equals one made outside the queue, and both ranks built."""
+    from fe_joint.study.queue import run_jobs
+
+    ref = _run(MPI.COMM_SELF).reduced_frequencies
+    got = {}
+
+    def run(job):
+        return {"f": _run(MPI.COMM_SELF).reduced_frequencies, "rank": MPI.COMM_WORLD.rank}
+
+    run_jobs(run, lambda folder, job, r: got.__setitem__(job.name, r),
+             [_Build(f"b{i}") for i in range(4)], tmp_path, comm=MPI.COMM_WORLD, skip_done=False)
+    if MPI.COMM_WORLD.rank == 0:
+        assert sorted(got) == ["b0", "b1", "b2", "b3"]
+        assert all(np.array_equal(r["f"], ref) for r in got.values())
+        assert {r["rank"] for r in got.values()} == set(range(MPI.COMM_WORLD.size))
+
+
+class _Unpicklable:
+    """A job that cannot be sent to another rank."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __reduce__(self):
+        raise TypeError("this job does not pickle")
+
+
+@pytest.mark.mpi
+def test_a_job_the_queue_cannot_send_fails_every_rank(tmp_path) -> None:
+    """When rank 0's server cannot hand a job over, every rank raises JobFailed (exit class 1)
+    naming the queue, instead of waiting for ever."""
+    from fe_joint.errors import JobFailed
+    from fe_joint.study.queue import run_jobs
+    if MPI.COMM_WORLD.size == 1:
+        pytest.skip("needs a second rank to send a job to")
+    import time
+
+    def run(job):       # long enough for rank 1 to ask while rank 0 is still in its first job
+        time.sleep(1.0)
+        return {"ok": 1.0}
+    with pytest.raises(JobFailed, match="does not pickle"):
+        run_jobs(run, lambda folder, job, r: None,
+                 [_Unpicklable(f"u{i}") for i in range(3)], tmp_path, comm=MPI.COMM_WORLD,
+                 skip_done=False)

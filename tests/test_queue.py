@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from fe_joint.errors import EXIT_BUG, EXIT_CONVERGENCE, JobFailed
-from fe_joint.study.queue import map_ranks, run_jobs
+from fe_joint.study.queue import busy_fractions, map_ranks, run_jobs
 
 
 @dataclass(frozen=True)
@@ -59,10 +59,17 @@ def test_dependencies_order_prepare_and_skip(tmp_path) -> None:
         order.append(job.name)
         return run(job)
     progress = []
-    run_jobs(run_logged, _write, jobs, tmp_path, after=lambda j: j.needs, prepare=prepare,
-             progress=lambda j: progress.append(j.name), skip_done=False)
+    t0 = time.perf_counter()
+    schedule = run_jobs(run_logged, _write, jobs, tmp_path, after=lambda j: j.needs,
+                        prepare=prepare, progress=lambda j: progress.append(j.name),
+                        skip_done=False)
+    wall = time.perf_counter() - t0
     # in list order among the ready ones: d waits for b and c, which wait for a
     assert order == ["a", "b", "c", "d", "e"]
+    # the schedule: every job run (not the skipped one) once, on rank 0, one after the other
+    assert [r["job"] for r in schedule] == order and {r["rank"] for r in schedule} == {0}
+    assert all(a["end"] <= b["start"] for a, b in zip(schedule, schedule[1:]))
+    assert 0.0 < busy_fractions(schedule, 1, wall)[0] <= 1.0
     assert "skipped" in seen and sorted(progress) == sorted(j.name for j in jobs)
     val = {j.name: json.loads((tmp_path / f"{j.name}.json").read_text()) for j in jobs
            if j.name != "skipped"}
@@ -99,11 +106,25 @@ def test_dependencies_on_two_ranks(tmp_path_factory) -> None:
     d = Path(comm.bcast(str(tmp_path_factory.mktemp("q")) if comm.rank == 0 else None, root=0))
     jobs = [_Job("slow", (), 0.6), _Job("late", ("slow",)), _Job("q1", (), 0.1), _Job("q2", ()),
             _Job("last", ("late", "q1"))]
-    run_jobs(_run_reading(d), _write, jobs, d, comm=comm, after=lambda j: j.needs,
-             skip_done=False)
+    t0 = time.perf_counter()
+    schedule = run_jobs(_run_reading(d), _write, jobs, d, comm=comm, after=lambda j: j.needs,
+                        skip_done=False)
+    wall = time.perf_counter() - t0
     if comm.rank == 0:
         val = {j.name: json.loads((d / f"{j.name}.json").read_text())["value"] for j in jobs}
         assert val == {"slow": 1, "late": 2, "q1": 1, "q2": 1, "last": 4}
+        # the schedule: each job once; a rank runs one job at a time; "late" starts after
+        # "slow" ends; the 0.6 s job keeps its rank busy that long
+        at = {r["job"]: r for r in schedule}
+        assert sorted(at) == sorted(j.name for j in jobs)
+        for rank in range(comm.size):
+            mine = [r for r in schedule if r["rank"] == rank]
+            assert all(a["end"] <= b["start"] for a, b in zip(mine, mine[1:]))
+        assert at["late"]["start"] >= at["slow"]["end"] >= at["slow"]["start"] + 0.6
+        busy = busy_fractions(schedule, comm.size, wall)
+        assert max(busy) <= 1.0 and busy[at["slow"]["rank"]] >= 0.6 / wall
+    else:
+        assert schedule is None
 
 
 def _square_or_fail(x: int) -> int:

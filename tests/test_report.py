@@ -105,7 +105,8 @@ def _write_manifests(run: Path) -> None:
         "1": {"seconds": {"global": 0.1}}, "5": {"seconds": {"global": 0.2}}}})
     _manifest(run, "dynamics", 9.0, {
         "levels": LEVELS, "level_info": {"macroslip": MACROSLIP},
-        "f_lin": {"baseline": 251.0, "v1": 249.0, "v2": 245.0}, "linear_peak_rel_error": 2e-6})
+        "f_lin": {"baseline": 251.0, "v1": 249.0, "v2": 245.0}, "linear_peak_rel_error": 2e-6,
+        "queue": {"seconds": 8.0, "busy": [0.95, 0.5]}})
 
 
 def make_run(run: Path) -> dict:
@@ -238,6 +239,9 @@ def test_levels_v3_timings_speed(report):
     assert t["curves"] == {k.name: cr.seconds for k, cr in w["curves"].items()}
     assert t["speed_vs_error"] == w["speed"]
     assert "speed_vs_error" not in s and "timings_s" not in s
+    # the dynamics stage's job queue: its wall time and each rank's busy share, in the cost table
+    assert t["queues"] == {"dynamics": {"seconds": 8.0, "busy": [0.95, 0.5]}}
+    assert "| dynamics | 9.0 | 95 % / 50 % of 8.0 s |" in (run / "report.md").read_text()
 
 
 def test_summary_holds_no_wall_time(report):

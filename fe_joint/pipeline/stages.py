@@ -227,8 +227,10 @@ def stage_dynamics(ctx: StageContext) -> dict:
         bar = tqdm(total=len(queue), desc="dynamics", unit="job")
     tick = (lambda job: bar.update(1)) if bar is not None else None
     sched = study.DynamicsQueue(inp, inp_tiny, folder, every, alts, rm_key)
-    run_jobs(sched.run, sched.write, queue, folder, ctx.comm, tick, skip_done=False,
-             after=sched.after, prepare=sched.prepare)
+    t0 = time.perf_counter()
+    schedule = run_jobs(sched.run, sched.write, queue, folder, ctx.comm, tick, skip_done=False,
+                        after=sched.after, prepare=sched.prepare)
+    queue_info = _queue_record(ctx, "dynamics", schedule, time.perf_counter() - t0)
     # the k_t definitions at the v3 peaks and the alternative joints' backbones (issue 13)
     t0 = time.perf_counter()
     defs = stiff_defs.dynamics_study(inp, folder, ctx.comm)
@@ -238,7 +240,7 @@ def stage_dynamics(ctx: StageContext) -> dict:
     ctx.files["dynamics"] = ([folder / f for j in every + bb_jobs for f in j.files]
                              + stiff_defs.files(folder, defs))
     summary: dict = {"levels": levels, "level_info": level_info, "f_lin": f_lin, "curves": {},
-                     "v3": {}, "stiffness_definitions": defs}
+                     "v3": {}, "stiffness_definitions": defs, "queue": queue_info}
     if ctx.rank == 0:
         curves = load_curves(folder, sorted(k.name for j in every for k in j.curve_keys))
         summary["curves"] = {k.name: _curve_summary(cr) for k, cr in curves.items()}
@@ -266,28 +268,47 @@ def stage_dynamics(ctx: StageContext) -> dict:
     return summary
 
 
-def _coarser_models(c, comm) -> list:
-    """Reduced models of the case at the coarser lap meshes of the element-count table:
-    [(lap mesh size mm, ReducedModel, seconds)]. Collective on ``comm`` (None: COMM_WORLD), as
-    the ``fe`` stage: a rank-0-alone FE build inside an MPI run ended once in a crash of the
-    waiting rank ("stack smashing detected" in mpi4py) that a small reproduction did not show,
-    and every other FE build in the pipeline is collective."""
+def _coarser_model(c, size: float) -> tuple:
+    """The case's reduced model at lap mesh size ``size`` (mm), built by this rank alone (a row
+    of the element-count table, a job of the speed stage's queue):
+    (size, ReducedModel, FE seconds, baseline JointModel on it).
+
+    On this rank's own communicator, so that the two coarser models are built at once, one per
+    rank, beside the stage's other rows: a 4.0 mm model took 29.9 s alone against 20.2 s on 2
+    ranks, and the ranks had built the two one after the other (48 s of the 85 s stage). On one
+    rank or two the model is the same serial build.
+    """
     import dataclasses
 
     from mpi4py import MPI
 
     from ..fe.mesh import load_resonator
     from ..fe.reduction import build_reduced_model_from_fe
-    from ..study import speed_error
-    out = []
-    for size in speed_error.lap_mesh_sizes(c.geometry.lap_mesh_size):
-        t0 = time.perf_counter()
-        fe = load_resonator(dataclasses.replace(c.geometry, lap_mesh_size=size),
-                            MPI.COMM_WORLD if comm is None else comm)
-        rm = build_reduced_model_from_fe(fe, c.material, c.preload.bolt_force, c.reduction.damping_ratio,
-                                         c.reduction.cutoff_hz, n_full_elastic=0)
-        out.append((size, rm, time.perf_counter() - t0))
-    return out
+    t0 = time.perf_counter()
+    fe = load_resonator(dataclasses.replace(c.geometry, lap_mesh_size=size), MPI.COMM_SELF)
+    rm = build_reduced_model_from_fe(fe, c.material, c.preload.bolt_force, c.reduction.damping_ratio,
+                                     c.reduction.cutoff_hz, n_full_elastic=0)
+    sec = time.perf_counter() - t0
+    return size, rm, sec, joint_baseline(ms.interface_setup(rm, c.geometry, c.material, c.roughness),
+                                         c.contact.k_ref)
+
+
+def _queue_record(ctx: StageContext, folder: str, schedule: list | None, wall: float) -> dict:
+    """A stage's job queue: ``<folder>/schedule.json`` (each job's rank, start and end, s; rank
+    0 writes it), a line on how busy the ranks were, and {"seconds", "busy"} for the summary
+    (the same on every rank)."""
+    from ..study.queue import busy_fractions
+    ranks = 1 if ctx.comm is None else ctx.comm.size
+    info = None
+    if ctx.rank == 0:
+        info = {"seconds": wall, "busy": busy_fractions(schedule, ranks, wall)}
+        ctx.path(folder).mkdir(parents=True, exist_ok=True)
+        tmp = ctx.path(folder, "schedule.json.tmp")
+        tmp.write_text(json.dumps({**info, "jobs": schedule}, indent=1))
+        tmp.replace(ctx.path(folder, "schedule.json"))
+        ctx.print(f"[fe-joint] {folder}: job queue {wall:.1f} s, ranks busy "
+                  + " / ".join(f"{100 * b:.0f} %" for b in info["busy"]))
+    return ctx.comm.bcast(info, root=0) if ctx.comm is not None else info
 
 
 def stage_speed(ctx: StageContext) -> dict:
@@ -299,17 +320,18 @@ def stage_speed(ctx: StageContext) -> dict:
     [rows]}); it never touches the study's curves.
     """
     c = ctx.case
-    tables = _speed_tables(ctx) if c.dynamics.speed_study else {}
+    tables, queue_info = _speed_tables(ctx) if c.dynamics.speed_study else ({}, None)
     if ctx.rank == 0:
         ctx.path("speed").mkdir(parents=True, exist_ok=True)
         tmp = ctx.path("speed", "speed_error.json.tmp")
         tmp.write_text(json.dumps(tables, indent=1, default=float))
         tmp.replace(ctx.path("speed", "speed_error.json"))
-    return {"tables": sorted(tables), "skipped": not c.dynamics.speed_study}
+    return {"tables": sorted(tables), "skipped": not c.dynamics.speed_study, "queue": queue_info}
 
 
-def _speed_tables(ctx: StageContext) -> dict:
-    """The speed stage's tables, its rows computed by the job queue on every rank."""
+def _speed_tables(ctx: StageContext) -> tuple[dict, dict]:
+    """The speed stage's tables (rank 0; {} on the others), its rows computed by the job queue
+    on every rank, and the queue's record (:func:`_queue_record`)."""
     from ..study import speed_error as se
     c = ctx.case
     rm = _reduced_model(ctx)
@@ -324,23 +346,28 @@ def _speed_tables(ctx: StageContext) -> dict:
           if levels and ctx.path("dynamics", f"{key.name}.npz").exists() else None)
     hs = (1, 3, 5) if c.dynamics.harmonics <= 3 else (1, 3, 5, 7)
     knobs = se.knob_grid(hs) if cr is not None else None
-    models = []
+    # the element-count table's models, the case's own last; the coarser ones are built by
+    # their rows' jobs (None here)
+    models: list = []
     if cr is not None:
         fe_s = float(((ctx.summaries.get("fe") or {}).get("timings") or {}).get("total_s", float("nan")))
-        for size, rm_s, sec in _coarser_models(c, ctx.comm) + [(c.geometry.lap_mesh_size, rm, fe_s)]:
-            su = ms.interface_setup(rm_s, c.geometry, c.material, c.roughness)
-            models.append((size, rm_s, sec, joint_baseline(su, c.contact.k_ref)))
+        su = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
+        models = [None] * len(se.lap_mesh_sizes(c.geometry.lap_mesh_size)) + [
+            (c.geometry.lap_mesh_size, rm, fe_s, joint_baseline(su, c.contact.k_ref))]
     f_case = (stuck_modes(rm.K, rm.M, rm.pair_dofs, models[-1][3]).frequency if models else 0.0)
     jobs = se.speed_jobs(grids, knobs, len(models), (settings.harmonics, settings.samples))
     ref: dict = {}     # the reference peak, read from disk by the first row that needs it
 
+    ranks = 1 if ctx.comm is None else ctx.comm.size
+
     def run(job: se.SpeedJob) -> dict:
         if job.peak_of:
-            return se.own_fields(job, models)
+            return {**se.own_fields(job, models), **({"FE ranks": ranks} if job.table == "mesh" else {})}
         if job.table == "bem":
             return se.bem_row(rm, c, job.grid)
-        if job.table == "mesh":
-            return se.mesh_row(models[job.model], f_case, cr.level, settings, cr.peak_hz)
+        if job.table == "mesh":     # a coarser mesh: its FE model built by this rank alone
+            model = _coarser_model(c, se.lap_mesh_sizes(c.geometry.lap_mesh_size)[job.model])
+            return {**se.mesh_row(model, f_case, cr.level, settings, cr.peak_hz), "FE ranks": 1}
         if job.table == "reference":
             return se.reference_row(rm, models[-1][3], cr.level, settings, cr.peak_hz)
         if not ref:        # written before any row that needs it is dealt (after=)
@@ -357,12 +384,15 @@ def _speed_tables(ctx: StageContext) -> dict:
             if f.stem not in keep:
                 f.unlink()
     # the harmonics and samples rows start from the reference's peak: dealt once it is written
-    run_jobs(run, lambda fold, job, row: se.write_row(fold, job, row, stage_key), jobs, folder,
-             comm=ctx.comm, after=lambda j: {se.REFERENCE} if j.needs_reference else set())
+    t0 = time.perf_counter()
+    schedule = run_jobs(run, lambda fold, job, row: se.write_row(fold, job, row, stage_key), jobs,
+                        folder, comm=ctx.comm,
+                        after=lambda j: {se.REFERENCE} if j.needs_reference else set())
+    queue_info = _queue_record(ctx, "speed", schedule, time.perf_counter() - t0)
     if ctx.rank != 0:
-        return {}
+        return {}, queue_info
     out = se.assemble_tables(jobs, se.read_rows(folder, jobs, stage_key), hs[-1])
-    return {f"global BEM grid (Rq = {rq_label(c.roughness.v_rq_um)} µm)": out.pop("bem"), **out}
+    return {f"global BEM grid (Rq = {rq_label(c.roughness.v_rq_um)} µm)": out.pop("bem"), **out}, queue_info
 
 
 def stage_report(ctx: StageContext) -> dict:

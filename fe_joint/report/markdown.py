@@ -163,8 +163,9 @@ def _v3(s: dict, t: dict) -> list[str]:
 
 def _cost(s: dict, t: dict) -> list[str]:
     """Wall time per stage and per FRF curve, s (from the timings ``t``), beside the paper's."""
-    L = ["", "## Cost", "", "| stage | wall time [s] |", "|---|---|"]
-    L += [f"| {k} | {v:.1f} |" for k, v in t["stages"].items()]
+    q = t.get("queues", {})
+    L = ["", "## Cost", "", "| stage | wall time [s] | ranks busy in its job queue |", "|---|---|---|"]
+    L += [f"| {k} | {v:.1f} | {_busy(q.get(k))} |" for k, v in t["stages"].items()]
     L += ["", "| FRF curve | points | wall time [s] | sweep's Newton tolerance |",
           "|---|---|---|---|"]
     L += [f"| {k} | {v['n_points']} | {t['curves'][k]:.1f} | {_sweep_tol(v)} |"
@@ -173,6 +174,14 @@ def _cost(s: dict, t: dict) -> list[str]:
     L += ["", "The paper's FORSE curves took 13 682 s (smooth, 1000 N) and 6 957 / 6 362 / 6 031 / 5 954 s "
           "(Rq 1 / 5 / 10 / 15 µm) on a 20-core node; its BEM analyses are in its Table 3."]
     return L
+
+
+def _busy(queue: dict | None) -> str:
+    """Each rank's busy share of a stage's job queue, and the queue's wall time ("" none)."""
+    if not queue:
+        return ""
+    return (" / ".join(f"{100 * b:.0f} %" for b in queue["busy"])
+            + f" of {queue['seconds']:.1f} s")
 
 
 def _sweep_tol(peak: dict) -> str:

@@ -69,8 +69,8 @@ def build_timings(data: ReportData) -> dict:
     Returns:
         {"stages": per stage, "fe": the FE stage's parts, "contact": per surface its solves,
         "curves": per FRF curve, "v3": per fixed point the seconds of each pass, "backbones":
-        per backbone, and "speed_vs_error": the speed-against-error tables (when the run has
-        them)}.
+        per backbone, "queues": per stage with a job queue its {"seconds", "busy": each rank's
+        share}, and "speed_vs_error": the speed-against-error tables (when the run has them)}.
     """
     fe, ct = data.summaries["fe"], data.summaries["contact"]
     out = {"stages": dict(data.stage_seconds), "fe": fe.get("timings", {}),
@@ -80,6 +80,9 @@ def build_timings(data: ReportData) -> dict:
                   for rq, r in sorted(data.v3_records.items())},
            "backbones": {k.name: br.seconds
                          for k, br in sorted(data.backbones.items(), key=lambda kv: kv[0].name)}}
+    queues = {k: v["queue"] for k, v in data.summaries.items() if isinstance(v, dict) and v.get("queue")}
+    if queues:      # the job queues' wall time and each rank's busy share
+        out["queues"] = queues
     if data.speed:
         out["speed_vs_error"] = data.speed
     # commit, versions, ranks and dates: the same inputs at another time are the same numbers

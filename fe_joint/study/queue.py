@@ -8,6 +8,8 @@ import time
 from pathlib import Path
 from typing import Callable, Iterable
 
+import numpy as np
+
 from ..errors import JobFailed, classify
 
 
@@ -78,6 +80,20 @@ class _Schedule:
         self.flying: set[str] = set()
         self.failure = None
         self.lock = threading.Lock()
+        self.t0 = time.perf_counter()
+        self.trace: dict[str, dict] = {}       # job name -> {"rank", "start", "end"} (s from t0)
+
+    def dealt(self, job, rank: int) -> None:
+        """Note that ``job`` went to ``rank`` now (the schedule's record)."""
+        with self.lock:
+            self.trace[job.name] = {"job": job.name, "rank": rank,
+                                    "start": time.perf_counter() - self.t0}
+
+    def schedule(self) -> list[dict]:
+        """Every finished job's rank and start and end, s from the queue's start, by start."""
+        with self.lock:
+            return sorted((dict(r) for r in self.trace.values() if "end" in r),
+                          key=lambda r: r["start"])
 
     def next_job(self):
         """The first ready job (marked in flight), ``_WAIT`` when none is ready but some are in
@@ -115,6 +131,8 @@ class _Schedule:
         """A job's outcome: written (and its dependants freed), or the queue's failure."""
         with self.lock:
             self.flying.discard(job.name)
+            if job.name in self.trace:
+                self.trace[job.name]["end"] = time.perf_counter() - self.t0
             if fail is not None:
                 if self.failure is None:
                     self.failure = fail
@@ -128,7 +146,7 @@ class _Schedule:
 def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, comm=None,
              progress=None, skip_done: bool = True,
              after: Callable[[object], Iterable[str]] | None = None,
-             prepare: Callable | None = None) -> None:
+             prepare: Callable | None = None) -> list[dict] | None:
     """Run the jobs not yet on disk, dealt dynamically to the ranks, longest first.
 
     With ``skip_done`` a job whose ``<name>.json`` marker exists is skipped; without it rank 0's
@@ -154,6 +172,10 @@ def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, c
         prepare: job → the job to run, or None if nothing needs running (rank 0, when the job
             is about to be dealt, its needs written): for jobs whose cache key depends on
             earlier results.
+    Returns:
+        rank 0: the schedule, one {"job", "rank", "start", "end"} per job run (s from the
+        queue's start; a job on another rank from when it was sent to when its result came
+        back); other ranks: None.
     """
     rank = comm.rank if comm is not None else 0
     size = comm.size if comm is not None else 1
@@ -164,6 +186,7 @@ def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, c
     failure = None
     if size == 1:
         while (job := sched.next_job()) is not None:
+            sched.dealt(job, 0)
             r, fail = _attempt(run_job, job)      # one rank: nothing in flight to wait for
             sched.finished(job, write_job, folder, r, fail)
         failure = sched.failure
@@ -186,16 +209,27 @@ def run_jobs(run_job: Callable, write_job: Callable, jobs: list, folder: Path, c
     if info is not None:
         own = failure[3] if failure is not None and len(failure) > 3 else None
         raise JobFailed(*info) from own
+    return sched.schedule() if sched is not None else None
+
+
+def busy_fractions(schedule: list[dict], ranks: int, wall: float) -> list[float]:
+    """Each rank's share of ``wall`` seconds spent in jobs (the schedule of :func:`run_jobs`)."""
+    busy = np.zeros(ranks)
+    for r in schedule:
+        busy[r["rank"]] += r["end"] - r["start"]
+    return (busy / wall).tolist() if wall > 0 else [0.0] * ranks
 
 
 def _serve_and_work(run_job: Callable, write_job: Callable, sched: _Schedule, folder: Path,
                     comm):
     """Rank 0: hand out jobs from a thread while working through the same queue."""
 
-    def serve():
-        from mpi4py import MPI
-        working = comm.size - 1
-        waiting: list[int] = []            # ranks that asked while no job was ready
+    from mpi4py import MPI
+    working = comm.size - 1
+    waiting: list[int] = []            # ranks that asked and have no answer yet
+
+    def serve_jobs():
+        nonlocal working
         while working:
             st = MPI.Status()
             # Open MPI's blocking receive busy-polls: in this thread it would take a core from
@@ -209,18 +243,37 @@ def _serve_and_work(run_job: Callable, write_job: Callable, sched: _Schedule, fo
                 if kind in ("result", "failed"):
                     sched.finished(job, write_job, folder, r, fail)
                 waiting.append(st.Get_source())
-            still = []
-            for src in waiting:
+            for src in list(waiting):
                 nxt = sched.next_job()
                 if nxt is _WAIT:
-                    still.append(src)
                     continue
+                if nxt is not None:
+                    sched.dealt(nxt, src)
                 comm.send(nxt, dest=src, tag=_TAG)
+                waiting.remove(src)
                 if nxt is None:
                     working -= 1
-            waiting = still
             if waiting:
                 time.sleep(POLL_SECONDS)
+
+    def serve():
+        """Serve the jobs; if serving itself fails (e.g. a job that does not pickle), the queue
+        fails and every rank is told to stop, rather than waiting for ever."""
+        nonlocal working
+        try:
+            serve_jobs()
+        except Exception as e:  # noqa: BLE001 - raised on every rank by run_jobs
+            with sched.lock:
+                if sched.failure is None:
+                    sched.failure = ("job queue", 1, f"{type(e).__name__}: {e}", e)
+            for src in waiting:
+                comm.send(None, dest=src, tag=_TAG)
+                working -= 1
+            while working:          # the others stop at their next request; results are dropped
+                st = MPI.Status()
+                comm.recv(source=MPI.ANY_SOURCE, tag=_TAG, status=st)
+                comm.send(None, dest=st.Get_source(), tag=_TAG)
+                working -= 1
 
     server = threading.Thread(target=serve, name="fe-joint-jobs", daemon=True)
     server.start()
@@ -228,6 +281,7 @@ def _serve_and_work(run_job: Callable, write_job: Callable, sched: _Schedule, fo
         if job is _WAIT:
             time.sleep(POLL_SECONDS)
             continue
+        sched.dealt(job, 0)
         r, fail = _attempt(run_job, job)
         sched.finished(job, write_job, folder, r, fail)
     server.join()

@@ -270,6 +270,7 @@ class SpeedJob:
         grid: BEM grid n (table "bem").
         harmonics, samples: H and n_t (tables "harmonics", "samples" and "reference").
         model: index into the stage's reduced models, the case's own last (table "mesh").
+        builds_model: the row builds its FE model first (a coarser mesh's row, table "mesh").
         peak_of: name of the job whose peak this row's is (the same computation: the harmonics
             row at the samples table's H, and the case mesh's row, whose sweep is the
             reference's); such a job computes only its own fields (:func:`own_fields`), "" for
@@ -282,6 +283,7 @@ class SpeedJob:
     samples: int = 0
     model: int = -1
     peak_of: str = ""
+    builds_model: bool = False
 
     @property
     def name(self) -> str:
@@ -296,16 +298,17 @@ class SpeedJob:
 #: the name of the reference job (:func:`speed_jobs`)
 REFERENCE = "reference-0"
 #: bump when how a row is computed changes: rows on disk of another version are computed again
-#: (2: the harmonics and samples rows are local searches from the reference peak, not sweeps)
-ROWS_VERSION = 2
+#: (2: the harmonics and samples rows are local searches from the reference peak, not sweeps;
+#: 3: a coarser mesh's row builds its FE model on its own rank, its FE time is that serial build)
+ROWS_VERSION = 3
 
 
 def speed_jobs(grids, knobs: tuple[list, list] | None, n_models: int,
                study_knobs: tuple[int, int] = (3, 128)) -> list[SpeedJob]:
-    """Every row of the stage as a job, the costly ones first (the queue deals them in order).
-
-    The harmonics and samples rows need the reference job's peak (:attr:`SpeedJob.needs_reference`):
-    the stage's queue deals them once it is written (``run_jobs(after=)``).
+    """Every row of the stage as a job, in the order the queue deals them: the reference (the
+    harmonics and samples rows need its peak, :attr:`SpeedJob.needs_reference`; the stage's queue
+    deals them once it is written, ``run_jobs(after=)``), then the coarser meshes' rows (each
+    builds its FE model, the longest jobs), then the others, costly ones first.
 
     Args:
         grids: BEM grid sizes; knobs: :func:`knob_grid`'s (H, n_t) rows, None without the HBM
@@ -325,21 +328,22 @@ def speed_jobs(grids, knobs: tuple[list, list] | None, n_models: int,
                  for i, (h, n) in enumerate(knobs[0])]
     # the case mesh's row is the reference's sweep (same model, H, n_t and band)
     jobs += [SpeedJob("mesh", i, model=i,
-                      peak_of=REFERENCE if knobs is not None and i == n_models - 1 else "")
+                      peak_of=REFERENCE if knobs is not None and i == n_models - 1 else "",
+                      builds_model=i < n_models - 1)
              for i in range(n_models)]
 
-    # a search's cost grows like (2H + 1)·n_t (the march) and the element count (a coarser mesh
-    # has fewer elements); the sweeps (reference, mesh) cost several local searches; the BEM
-    # rows (seconds) and the rows without a search go last
+    # the reference first (on the path of every harmonics and samples row); then the coarser
+    # meshes' rows, the finer first (an FE build, 20-45 s, and a sweep); a search's cost grows
+    # like (2H + 1)·n_t (the march); the BEM rows (seconds) and the rows without a search last
     def cost(j: SpeedJob) -> float:
+        if j.table == "reference":
+            return float("inf")
+        if j.builds_model:
+            return 1e12 * (1 + j.model)       # model index grows with the mesh's fineness
         if j.peak_of:
             return 0.0
         if j.table == "bem":
             return j.grid ** 2 / 1e6
-        if j.table == "mesh":
-            return 3 * (2 * H + 1) * nt * (1 + j.model) / max(n_models, 1)
-        if j.table == "reference":
-            return 3 * (2 * H + 1) * nt
         return (2 * j.harmonics + 1) * j.samples
     return sorted(jobs, key=lambda j: -cost(j))
 
