@@ -203,9 +203,10 @@ class ElementBlockPreconditioner:
                 a, b = 2 * h - 1, 2 * h
                 G[:, :, a, :, a], G[:, :, a, :, b] = Gh.real, Gh.imag
                 G[:, :, b, :, a], G[:, :, b, :, b] = -Gh.imag, Gh.real
-        A = G.reshape(k, 3 * nH, 3 * nH) @ Dg
-        A[:, np.arange(3 * nH), np.arange(3 * nH)] += 1.0
-        self.inv = _block_inverses(A)
+        GD = G.reshape(k, 3 * nH, 3 * nH) @ Dg
+        scale = 1.0 + np.abs(GD).sum(axis=1).max(axis=1)          # ||I|| + ||G_ee D_e||, 1-norm
+        GD[:, np.arange(3 * nH), np.arange(3 * nH)] += 1.0
+        self.inv = _block_inverses(GD, scale)
         # reduced-layout index (h p + 3e + d) of element-layout entry (e, d n_H + h)
         d, hh = np.divmod(np.arange(3 * nH), nH)
         self.idx = hh[None, :] * p + 3 * e[:, None] + d[None, :]
@@ -217,24 +218,44 @@ class ElementBlockPreconditioner:
         return out
 
 
-def _block_inverses(A: np.ndarray) -> np.ndarray:
+#: ||A^-1|| (||I|| + ||G D||) (1-norms) above which an element's block A = I + G D counts as
+#: singular (its inverse would only amplify round-off: about 1 / (500 eps))
+MAX_BLOCK_CONDITION = 1e13
+
+
+def _block_inverses(A: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
     """Inverses of the blocks A (k, n, n); a singular block's is the identity.
+
+    Args:
+        A: the blocks.
+        scale: (k,) the 1-norm of the terms each block is the sum of (I + G D: 1 + ||G D||);
+            None: the block's own norm.
 
     An element's own block can be singular although J is not (the elastic coupling to the other
     elements makes up for it): the stiff layer joint's backbone on a quick-preset model met one
     (session 14), and numpy's batched inverse then raised through the whole study. Such an
     element is left unpreconditioned; GMRES sees the rest preconditioned as before.
+
+    Singular in floating point, not only exactly: a block I + G D that cancels to round-off
+    (entries of 1e-16) is inverted without a zero pivot to entries of 1e17 (on an AMD EPYC whose
+    OpenBLAS rounds differently; elsewhere LAPACK met an exact zero). So a block counts as
+    singular too when ||A^-1|| times the norm of its terms exceeds :data:`MAX_BLOCK_CONDITION`.
     """
     try:
-        return np.linalg.inv(A)
+        out = np.linalg.inv(A)
     except np.linalg.LinAlgError:
         out = np.empty_like(A)
         for e in range(A.shape[0]):           # the rare failure path only
             try:
                 out[e] = np.linalg.inv(A[e])
             except np.linalg.LinAlgError:
-                out[e] = np.eye(A.shape[1])
-        return out
+                out[e] = np.inf
+    if scale is None:
+        scale = np.abs(A).sum(axis=1).max(axis=1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        cond = scale * np.abs(out).sum(axis=1).max(axis=1)
+    out[~(cond <= MAX_BLOCK_CONDITION)] = np.eye(A.shape[1])
+    return out
 
 
 class TwoLevelPreconditioner:
