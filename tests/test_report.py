@@ -164,6 +164,20 @@ def test_every_figure_and_text_written(report):
     assert json.loads((run / "summary.json").read_text()) == json.loads(json.dumps(summary, default=float))
 
 
+def test_figures_shared_by_two_ranks_are_the_figures_of_one(report, tmp_path):
+    """draw_figures' shares of 2 ranks are disjoint and together draw what one rank draws."""
+    from fe_joint.report.data import load_report_data
+    from fe_joint.report.figures import draw_figures
+    run = report[0]
+    data = load_report_data(run, case_from_dict(json.loads(json.dumps(CASE))))
+    one = draw_figures(data, tmp_path / "one")
+    shares = [draw_figures(data, tmp_path / "two", r, 2) for r in (0, 1)]
+    assert shares[0] and shares[1]
+    assert not {p.name for p in shares[0]} & {p.name for p in shares[1]}
+    assert sorted(p.name for p in shares[0] + shares[1]) == sorted(p.name for p in one)
+    assert sorted(p.name for p in (tmp_path / "two").iterdir()) == sorted(p.name for p in one)
+
+
 def test_k_eq_against_hand_sums(report):
     _, w, s = report
     sv, k_ref = w["surfaces"][5.0], CASE["contact"]["k_ref"]

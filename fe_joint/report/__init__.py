@@ -35,22 +35,27 @@ def write_report(out: Path, case: Case, comm=None) -> dict | None:
         out: the run's folder (stage manifests, fe/, contact/, dynamics/, speed/).
         case: the validated case of the run.
         comm: MPI communicator or None. On several ranks (collective) every rank loads the
-            artifacts and takes a share of the eigenproblems (``linear_frf.share_eigenproblems``),
-            then rank 0 alone writes.
+            artifacts, takes a share of the eigenproblems (``linear_frf.share_eigenproblems``)
+            and draws a share of the figures; rank 0 writes the rest.
     Returns:
         the summary dict written to summary.json (None on ranks other than 0).
     """
     data = load_report_data(Path(out), case)
-    if comm is not None and comm.size > 1:
+    several = comm is not None and comm.size > 1
+    if several:
         from .linear_frf import share_eigenproblems
         share_eigenproblems(data, comm)
-        if comm.rank != 0:
-            return None
-    draw_figures(data, data.out / "figures")
+    # the figures are dealt to the ranks (rank 0 also writes everything else)
+    draw_figures(data, data.out / "figures", *((comm.rank, comm.size) if several else (0, 1)))
+    if several and comm.rank != 0:
+        comm.barrier()
+        return None
     write_interface_results(data, data.out / PARAVIEW_FOLDER)
     summary, timings = build_summary(data), build_timings(data)
     timings["findings"] = findings_summary(cost_findings(data, summary, timings))
     write_summary(summary, data.out / "summary.json")
     write_summary(timings, data.out / "timings.json")
+    if several:
+        comm.barrier()          # every rank's figures are written: report.md links those it finds
     (data.out / "report.md").write_text(report_markdown(data, summary, timings))
     return summary
