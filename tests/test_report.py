@@ -97,7 +97,7 @@ def _manifest(folder: Path, stage: str, seconds: float, summary: dict) -> None:
 
 
 def _write_manifests(run: Path) -> None:
-    """The four stage manifests the report reads (what the stages would have summarized)."""
+    """The five stage manifests the report reads (what the stages would have summarized)."""
     _manifest(run, "mesh", 1.5, {"n_nodes": 40, "n_cells": 60, "n_dofs": 120, "n_pairs": NE})
     _manifest(run, "fe", 2.5, {"full_elastic_hz": [250.0, 900.0], "max_rel_freq_error": 4e-4,
                                "timings": {"total_s": 2.0}})
@@ -107,6 +107,8 @@ def _write_manifests(run: Path) -> None:
         "levels": LEVELS, "level_info": {"macroslip": MACROSLIP},
         "f_lin": {"baseline": 251.0, "v1": 249.0, "v2": 245.0}, "linear_peak_rel_error": 2e-6,
         "queue": {"seconds": 8.0, "busy": [0.95, 0.5]}})
+    _manifest(run, "speed", 4.0, {"tables": ["grid"], "skipped": False,
+                                  "queue": {"seconds": 3.5, "busy": [1.0, 0.75]}})
 
 
 def make_run(run: Path) -> dict:
@@ -247,15 +249,18 @@ def test_levels_v3_timings_speed(report):
     no_time = [{k: v for k, v in x.items() if k != "seconds"} for x in w["history"]]
     assert s["v3"] == {"v3-rq5": {"converged": True, "passes": 3, "history": no_time}}
     t = json.loads((run / "timings.json").read_text())
-    assert t["stages"] == {"mesh": 1.5, "fe": 2.5, "contact": 0.5, "dynamics": 9.0}
+    assert t["stages"] == {"mesh": 1.5, "fe": 2.5, "contact": 0.5, "dynamics": 9.0, "speed": 4.0}
     assert t["contact"] == {"1": {"global": 0.1}, "5": {"global": 0.2}}
     assert t["v3"] == {"v3-rq5": [x.get("seconds") for x in w["history"]]}
     assert t["curves"] == {k.name: cr.seconds for k, cr in w["curves"].items()}
     assert t["speed_vs_error"] == w["speed"]
     assert "speed_vs_error" not in s and "timings_s" not in s
     # the dynamics stage's job queue: its wall time and each rank's busy share, in the cost table
-    assert t["queues"] == {"dynamics": {"seconds": 8.0, "busy": [0.95, 0.5]}}
-    assert "| dynamics | 9.0 | 95 % / 50 % of 8.0 s |" in (run / "report.md").read_text()
+    assert t["queues"] == {"dynamics": {"seconds": 8.0, "busy": [0.95, 0.5]},
+                           "speed": {"seconds": 3.5, "busy": [1.0, 0.75]}}
+    md = (run / "report.md").read_text()
+    assert "| dynamics | 9.0 | 95 % / 50 % of 8.0 s |" in md
+    assert "| speed | 4.0 | 100 % / 75 % of 3.5 s |" in md
 
 
 def test_summary_holds_no_wall_time(report):

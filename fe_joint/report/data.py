@@ -21,6 +21,9 @@ from ..study.frf import CurveResult
 
 #: the stages whose manifests the report reads (summary and wall time)
 STAGES_READ = ("mesh", "fe", "contact", "dynamics")
+#: the stages whose wall time and job queue the cost table shows (the speed stage's tables are
+#: read from ``speed/speed_error.json``; nothing of summary.json comes from its manifest)
+STAGES_TIMED = STAGES_READ + ("speed",)
 
 #: the paper's numbers for the side-by-side tables (contact fraction in % per Rq in µm, N/mm³, s)
 PAPER = {
@@ -169,7 +172,7 @@ def load_report_data(out: Path, case: Case) -> ReportData:
         the artifacts as a ReportData.
     """
     out = Path(out)
-    manifests = {s: read_manifest(out, s) or {} for s in STAGES_READ}
+    manifests = {s: read_manifest(out, s) or {} for s in STAGES_TIMED}
     surfaces, extra = load_artifact(out / "contact" / "surfaces.npz", load_surfaces)
     records, arrays = _v3_files(out / "dynamics", sorted(surfaces))
     return ReportData(
