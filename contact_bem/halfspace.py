@@ -287,6 +287,12 @@ class ElasticHalfSpace:
         # viewed as float64 is a plain real multiply (512²: 0.4 vs 1.4 ms for complex × real)
         if "zz" in spectra:
             self._zz_pairs = np.repeat(self._zz, 2, axis=-1) if not np.iscomplexobj(self._zz) else None
+        if "xx" in spectra:
+            # the same for the tangential kernels (xy is odd in x and in y: a real spectrum too);
+            # the patch loops of the k_t definitions spent 7.7 s of 31 s in these products
+            tan = (self._xx, self._yy, self._xy)
+            self._tan_pairs = (None if any(np.iscomplexobj(k) for k in tan)
+                               else tuple(np.repeat(k, 2, axis=-1) for k in tan))
 
     def _ensure_tangential(self) -> None:
         if not self._tangential_ready:
@@ -364,12 +370,17 @@ class ElasticHalfSpace:
         plan = self._plan((int(np.prod(lead)), 2))
         plan.real_in[..., :ny] = q.reshape((-1, 2, nx, ny))
         s = plan.forward()
+        if self._tan_pairs is not None:
+            s = s.view(np.float64)     # real multipliers: (re, im) pairs times repeated reals
+            xx, yy, xy = self._tan_pairs
+        else:  # pragma: no cover - the Cerruti kernels' spectra are real
+            xx, yy, xy = self._xx, self._yy, self._xy
         sx = s[:, 0]
         sy = s[:, 1]
-        ux = self._xx * sx
-        ux += self._xy * sy
-        sy *= self._yy     # sy becomes u_y's spectrum in place, sx is still needed once
-        sy += self._xy * sx
+        ux = xx * sx
+        ux += xy * sy
+        sy *= yy           # sy becomes u_y's spectrum in place, sx is still needed once
+        sy += xy * sx
         sx[...] = ux
         return plan.inverse()[..., :ny].copy().reshape(lead + (2, nx, ny))
 

@@ -109,6 +109,12 @@ def shift_invert(K: PETSc.Mat, M: PETSc.Mat, sigma: float, nev: int, tol: float,
     eps.setTarget(sigma)
     eps.setWhichEigenpairs(which)
     eps.setTolerances(tol, max_it)
+    # no purification: SLEPc's default applies the shift-invert operator once more to every
+    # converged vector of a GHEP (removing components in M's null space, which a consistent mass
+    # matrix does not have); the Rayleigh-Ritz step of the callers re-orthonormalizes the
+    # vectors anyway. On a 58 464-DOF interior (4.0 mm lap mesh, 77 modes) it cost 5.6 of 22 s,
+    # and the eigenvalues moved by 1e-11 relative without it.
+    eps.setPurify(False)
     st = eps.getST()
     st.setType(SLEPc.ST.Type.SINVERT)
     st.setShift(sigma)
