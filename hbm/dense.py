@@ -79,9 +79,9 @@ def lu_solve_sign(A: np.ndarray, B: np.ndarray, stats: dict | None = None,
     Args:
         A: (n, n) C-ordered, float64 or (n >= MIXED_SIZE only) float32; overwritten (it holds
             factors afterwards, or is unchanged after a mixed-precision solve of a float64 A).
-            A float32 A is the matrix rounded to single precision, formed so by the caller (half
-            the memory and time of forming it in double); then ``matvec`` and ``rebuild`` are
-            needed.
+            A float32 A is the matrix to single precision, formed so by the caller (in single
+            precision arithmetic: its entries within a few ulps of the rounded ones, a fifth of
+            the time of forming it in double); then ``matvec`` and ``rebuild`` are needed.
         B: (n, m) or (n,) right-hand sides.
         stats: optional counters, incremented: "lu_single" (mixed-precision solves that kept
             the single-precision factors), "lu_double" (double-precision factorizations).

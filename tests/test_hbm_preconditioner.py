@@ -73,6 +73,13 @@ def test_the_dense_jacobian_is_identity_plus_receptance_times_friction_jacobian(
         big = np.full((D.shape[0] + 1,) * 2, np.nan)
         hb._dense_jacobian(omega, cn, Dg, out=big[:-1, :-1])
         assert np.array_equal(big[:-1, :-1], J) and np.isnan(big[-1]).all() and np.isnan(big[:, -1]).all()
+        # a single-precision view (the mixed-precision LU's matrix) is formed in single
+        # precision: every entry within a few single-precision ulps of the double product's
+        big32 = np.full((D.shape[0] + 1,) * 2, np.nan, dtype=np.float32)
+        hb._dense_jacobian(omega, cn, Dg, out=big32[:-1, :-1])
+        eps32 = float(np.finfo(np.float32).eps)
+        assert np.abs(big32[:-1, :-1] - ref).max() <= 8 * eps32 * np.abs(ref).max()
+        assert np.abs(big32[:-1, :-1] - ref).max() > 0 and np.isnan(big32[-1]).all()
 
 
 def test_the_preconditioner_is_the_inverse_on_the_structure_it_keeps():
