@@ -1,5 +1,6 @@
 """Limits, rigid-body handling, energy balance, Krylov path and input validation."""
 import numpy as np
+import scipy.linalg as sla
 import pytest
 
 from hbm import ConvergenceError, FrictionContacts, HarmonicBalance, LinearStructure
@@ -124,6 +125,31 @@ def test_receptance_residual_flexibility_and_rigid_modes():
     for s_ in (s_full, s_trunc):
         G0 = Receptance(s_, B, k0).matrix(0, 1.0)
         assert abs(G0[0, 0].real - u_pinv) <= 1e-9 * abs(u_pinv)
+    # the static response of the discarded modes (from the structure's standard form) is their
+    # modal sum, taken from a dense generalized eigendecomposition of (K~, M)
+    lam, Phi = sla.eigh(Kb, M)
+    y = np.linspace(-1.0, 1.0, n)
+    ref = Phi[:, 4:] @ (Phi[:, 4:].T @ y / lam[4:])
+    got = Receptance(s_trunc, B, k0).residual_full(y)
+    assert np.abs(got - ref).max() <= 1e-9 * np.abs(ref).max()
+
+
+def test_receptances_of_two_contact_maps_on_one_structure():
+    """The structure keeps W = L^-1 B^T for the last contact map only: receptances of two maps
+    built in turn each equal the direct receptance B (K~ - w^2 M + i w C)^-1 B^T of their own."""
+    n = 12
+    M, K = chain(n)
+    C = 0.002 * K
+    s = LinearStructure(M, K, C, n_modes=n)
+    maps = [np.array([[[3, -1, -1], [7, -1, -1]]]), np.array([[[2, -1, -1], [9, -1, -1]]])]
+    k0 = np.array([30.0, 0, 0])
+    for dofs in maps + maps:
+        B = _contact_operator(dofs, n)
+        Bd = B.toarray()
+        Kb = K + Bd.T @ np.diag(k0) @ Bd
+        Gd = Bd @ np.linalg.solve(Kb - 0.8 * M + 1j * np.sqrt(0.8) * C, Bd.T)
+        G = s.receptance(B, k0).matrix(1, np.sqrt(0.8))
+        assert np.abs(G - Gd).max() <= 1e-9 * np.abs(Gd).max()
 
 
 
