@@ -2,7 +2,7 @@
 
 The receptance is written about a *linear base*: the structure plus the stuck stiffness of every
 contact element that is closed at rest (``K~ = K + B^T diag(k0) B``). Its low modes are computed
-once (dense generalized ``eigh`` of (K~, M), lowest ``n_modes`` pairs) and the contribution of
+once (a dense ``eigh``, lowest ``n_modes`` pairs, below) and the contribution of
 the discarded modes is kept as static residual flexibility, so that
 
     G(h w) = Psi (Omega^2 - (h w)^2 + i h w C_m)^-1 Psi^T + R,        Psi = B Phi
@@ -18,9 +18,12 @@ The eigenproblem is solved in the standard form of the structure, ``M = L L^T``,
 the structure (they do not depend on k0), and ``Phi = L^-T Y`` for C's eigenvectors Y. Every joint
 of a study (each v3 pass, each configuration, on each rank) has its own k0 on the same structure
 and contact map: its receptance then costs a rank-nc update, a standard ``eigh`` of the lowest
-pairs and a Cholesky of C (1.14 s against 1.55 s through the generalized ``eigh`` of (K~, M) and
-a Cholesky of K~ at 2198 DOFs, 1059 contact coordinates; eigenvalues equal to 4e-12, R to 3e-11
+pairs and a Cholesky of C (1.18 s against 1.47 s through the generalized ``eigh`` of (K~, M) and
+a Cholesky of K~ at 2198 DOFs, 1059 contact coordinates; eigenvalues equal to 7e-12, R to 4e-11
 relative). The first receptance of a structure pays for C_K and W once (about 1 s).
+
+Every mode's sign is fixed by a rule (the largest entry of its contact shape B phi positive), not
+left to LAPACK: a nonlinear mode's backbone depends on the sign of its mode (``Receptance``).
 """
 from __future__ import annotations
 
