@@ -48,6 +48,14 @@ def _check_square(name: str, A, n: int | None) -> np.ndarray:
     return 0.5 * (A + A.T)
 
 
+def _map_digest(B: sp.csr_matrix):
+    """sha256 of a contact map (its shape and CSR arrays), still open for more input."""
+    h = hashlib.sha256()
+    for a in (np.asarray(B.shape), B.indptr, B.indices, B.data):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h
+
+
 def _upper_gram(W: np.ndarray, k: np.ndarray | None) -> np.ndarray:
     """W diag(k) W^T for W (n, q), k (q,) (None: ones), its upper triangle filled (the rest is
     not meaningful): BLAS syrk on W sqrt(k) where k >= 0, a full product otherwise."""
@@ -131,9 +139,7 @@ class LinearStructure:
         """
         B = sp.csr_matrix(B)
         k0 = np.ascontiguousarray(k0, dtype=float)
-        h = hashlib.sha256()
-        for a in (np.asarray(B.shape), B.indptr, B.indices, B.data):
-            h.update(np.ascontiguousarray(a).tobytes())
+        h = _map_digest(B)
         key_b = h.hexdigest()
         h.update(k0.tobytes())
         key = h.hexdigest()
@@ -160,10 +166,7 @@ class Receptance:
         self.B = B
         n, m = s.n, s.n_modes
         if key_b is None:
-            h = hashlib.sha256()
-            for a in (np.asarray(B.shape), B.indptr, B.indices, B.data):
-                h.update(np.ascontiguousarray(a).tobytes())
-            key_b = h.hexdigest()
+            key_b = _map_digest(sp.csr_matrix(B)).hexdigest()
         Kb = s.K + (B.T @ sp.diags(k0) @ B).toarray()
         # standard form (module docstring): C = C_K + W diag(k0) W^T, Phi = L^-T Y
         L, CK = s.standard_form()
