@@ -2,7 +2,7 @@
 
 The receptance is written about a *linear base*: the structure plus the stuck stiffness of every
 contact element that is closed at rest (``K~ = K + B^T diag(k0) B``). Its low modes are computed
-once (a dense ``eigh``, lowest ``n_modes`` pairs, below) and the contribution of
+once (dense generalized ``eigh`` of (K~, M), lowest ``n_modes`` pairs) and the contribution of
 the discarded modes is kept as static residual flexibility, so that
 
     G(h w) = Psi (Omega^2 - (h w)^2 + i h w C_m)^-1 Psi^T + R,        Psi = B Phi
@@ -12,18 +12,6 @@ detected by their zero eigenvalue; they enter the dynamic harmonics (h >= 1) thr
 and are removed from the static one (h = 0): the 0th harmonic only sees self-equilibrated contact
 forces, so the flexibility with the rigid-body modes removed is used,
 ``G_el = (K~ + s M Phi_r Phi_r^T M)^-1 - Phi_r Phi_r^T / s``.
-
-The eigenproblem is solved in the standard form of the structure, ``M = L L^T``,
-``C = L^-1 K~ L^-T = C_K + W diag(k0) W^T`` with ``C_K = L^-1 K L^-T`` and ``W = L^-1 B^T`` kept by
-the structure (they do not depend on k0), and ``Phi = L^-T Y`` for C's eigenvectors Y. Every joint
-of a study (each v3 pass, each configuration, on each rank) has its own k0 on the same structure
-and contact map: its receptance then costs a rank-nc update, a standard ``eigh`` of the lowest
-pairs and a Cholesky of C (1.18 s against 1.47 s through the generalized ``eigh`` of (K~, M) and
-a Cholesky of K~ at 2198 DOFs, 1059 contact coordinates; eigenvalues equal to 7e-12, R to 4e-11
-relative). The first receptance of a structure pays for C_K and W once (about 1 s).
-
-Every mode's sign is fixed by a rule (the largest entry of its contact shape B phi positive), not
-left to LAPACK: a nonlinear mode's backbone depends on the sign of its mode (``Receptance``).
 """
 from __future__ import annotations
 
@@ -31,7 +19,6 @@ import hashlib
 
 import numpy as np
 import scipy.linalg as sla
-from scipy.linalg import blas
 import scipy.sparse as sp
 
 
@@ -46,25 +33,6 @@ def _check_square(name: str, A, n: int | None) -> np.ndarray:
     if np.abs(A - A.T).max() > 1e-8 * max(np.abs(A).max(), 1e-300):
         raise ValueError(f"{name} must be symmetric (|A - A^T| <= 1e-8 max|A|)")
     return 0.5 * (A + A.T)
-
-
-def _map_digest(B: sp.csr_matrix):
-    """sha256 of a contact map (its shape and CSR arrays), still open for more input."""
-    h = hashlib.sha256()
-    for a in (np.asarray(B.shape), B.indptr, B.indices, B.data):
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h
-
-
-def _upper_gram(W: np.ndarray, k: np.ndarray | None) -> np.ndarray:
-    """W diag(k) W^T for W (n, q), k (q,) (None: ones), its upper triangle filled (the rest is
-    not meaningful): BLAS syrk on W sqrt(k) where k >= 0, a full product otherwise."""
-    if k is None:
-        return blas.dsyrk(1.0, np.asfortranarray(W), lower=0)
-    if np.all(k >= 0):
-        nz = k > 0
-        return blas.dsyrk(1.0, np.asfortranarray(W[:, nz] * np.sqrt(k[nz])), lower=0)
-    return (W * k) @ W.T
 
 
 class LinearStructure:
@@ -104,26 +72,6 @@ class LinearStructure:
         except np.linalg.LinAlgError:
             raise ValueError("M must be positive definite") from None
         self._receptances: list = []       # [(key, Receptance)], most recent first
-        self._standard: tuple | None = None  # (L, C_K): M = L L^T, L^-1 K L^-T
-        self._mapped: tuple | None = None    # (key of B, W = L^-1 B^T)
-
-    def standard_form(self) -> tuple[np.ndarray, np.ndarray]:
-        """(L, C_K): the lower Cholesky factor of M (M = L L^T) and L^-1 K L^-T (symmetric),
-        computed on first use and kept."""
-        if self._standard is None:
-            L = sla.cholesky(self.M, lower=True, check_finite=False)
-            X = sla.solve_triangular(L, self.K, lower=True, check_finite=False)      # L^-1 K
-            CK = sla.solve_triangular(L, X.T, lower=True, check_finite=False)       # .. L^-T
-            self._standard = (L, 0.5 * (CK + CK.T))
-        return self._standard
-
-    def mapped(self, B: sp.csr_matrix, key: str) -> np.ndarray:
-        """W = L^-1 B^T (n, nc) of the contact map B (whose digest is ``key``), kept for the
-        last B."""
-        if self._mapped is None or self._mapped[0] != key:
-            L, _ = self.standard_form()
-            self._mapped = (key, sla.solve_triangular(L, B.T.toarray(), lower=True, check_finite=False))
-        return self._mapped[1]
 
     #: receptances a structure keeps (``receptance``): about 90 MB each at 2198 DOFs
     RECEPTANCES_KEPT = 3
@@ -139,12 +87,12 @@ class LinearStructure:
         """
         B = sp.csr_matrix(B)
         k0 = np.ascontiguousarray(k0, dtype=float)
-        h = _map_digest(B)
-        key_b = h.hexdigest()
-        h.update(k0.tobytes())
+        h = hashlib.sha256()
+        for a in (np.asarray(B.shape), B.indptr, B.indices, B.data, k0):
+            h.update(np.ascontiguousarray(a).tobytes())
         key = h.hexdigest()
         hit = [G for k, G in self._receptances if k == key]
-        G = hit[0] if hit else Receptance(self, B, k0, key_b)
+        G = hit[0] if hit else Receptance(self, B, k0)
         self._receptances = ([(key, G)] + [(k, g) for k, g in self._receptances if k != key]
                              )[:self.RECEPTANCES_KEPT]
         return G
@@ -157,35 +105,14 @@ class Receptance:
         s: the linear structure.
         B: sparse (nc, n) map from structure DOFs to contact relative coordinates.
         k0: (nc,) stiffness of the linear base at each contact coordinate, N/mm.
-        key_b: digest of B (the structure keeps W = L^-1 B^T for it); None: computed here.
     """
 
-    def __init__(self, s: LinearStructure, B: sp.csr_matrix, k0: np.ndarray,
-                 key_b: str | None = None) -> None:
+    def __init__(self, s: LinearStructure, B: sp.csr_matrix, k0: np.ndarray) -> None:
         self.s = s
         self.B = B
         n, m = s.n, s.n_modes
-        if key_b is None:
-            key_b = _map_digest(sp.csr_matrix(B)).hexdigest()
         Kb = s.K + (B.T @ sp.diags(k0) @ B).toarray()
-        # standard form (module docstring): C = C_K + W diag(k0) W^T, Phi = L^-T Y
-        L, CK = s.standard_form()
-        W = s.mapped(B, key_b)
-        # only C's upper triangle is formed and read (a symmetric rank-k update: half a product)
-        C = _upper_gram(W, k0)
-        C += CK
-        lam, Y = sla.eigh(C, lower=False, subset_by_index=[0, m - 1], check_finite=False)
-        Phi = sla.solve_triangular(L, Y, lower=True, trans="T", check_finite=False)
-        Psi = np.asarray(B @ Phi)                            # (nc, m)
-        # a sign for every mode, not LAPACK's (which is arbitrary and changes with the driver and
-        # with round-off): the largest entry of its contact shape is positive. A backbone
-        # depends on its mode's sign (the friction marches start at t = 0): the quick model's
-        # baseline backbone took 2.6 s with one and 8-10 s with the other. Negation is exact, so
-        # the receptance's products are the same bits either way.
-        top = Psi[np.argmax(np.abs(Psi), axis=0), np.arange(Psi.shape[1])]
-        flip = top < 0
-        Phi[:, flip] *= -1.0
-        Psi[:, flip] *= -1.0
+        lam, Phi = sla.eigh(Kb, s.M, subset_by_index=[0, m - 1])
         scale = max(np.max(np.diag(Kb) / np.diag(s.M)), 1e-300)
         rigid = lam < 1e-9 * scale
         lam = np.where(rigid, 0.0, lam)
@@ -201,7 +128,7 @@ class Receptance:
         self.diag_damping = not np.any(np.abs(off) > 1e-12 * max(np.abs(Cm).max(), 1e-300))
         self.Cm = Cm
         self.cvec = np.diag(Cm).copy()
-        self.Psi = Psi
+        self.Psi = np.asarray(B @ Phi)                       # (nc, m)
         self.complete = m == n
         el = ~rigid
         self.sigma = lam[el][0] if el.any() else scale
@@ -209,16 +136,10 @@ class Receptance:
             self.R = np.zeros((B.shape[0], B.shape[0]))
             self._chol = None
         else:
-            # K~ + s M Phi_r Phi_r^T M = L (C + s Y_r Y_r^T) L^T, so with C_reg = Lc Lc^T:
-            # B (..)^-1 B^T = Z^T Z, Z = Lc^-1 W
-            Yr = Y[:, rigid]
-            C += self.sigma * Yr @ Yr.T
-            U = sla.cholesky(C, lower=False, overwrite_a=True, check_finite=False)   # U^T U
-            self._chol = (L, U)
-            Z = sla.solve_triangular(U, W, trans="T", check_finite=False)           # U^-T W
-            Gel = _upper_gram(Z.T, None)
-            Gel = np.triu(Gel) + np.triu(Gel, 1).T
-            Gel -= self.Psi[:, rigid] @ self.Psi[:, rigid].T / self.sigma
+            Pr = s.M @ Phi[:, rigid]
+            self._chol = sla.cho_factor(Kb + self.sigma * Pr @ Pr.T)
+            X = sla.cho_solve(self._chol, B.T.toarray())    # (n, nc)
+            Gel = np.asarray(B @ X) - self.Psi[:, rigid] @ self.Psi[:, rigid].T / self.sigma
             Pe = self.Psi[:, el]
             self.R = Gel - (Pe / lam[el]) @ Pe.T
             self.R = 0.5 * (self.R + self.R.T)
@@ -274,10 +195,7 @@ class Receptance:
             return np.zeros_like(y)
         rigid, el = self.rigid, ~self.rigid
         Phi = self.Phi
-        L, U = self._chol                  # (K~ + s M Phi_r Phi_r^T M)^-1 = L^-T C_reg^-1 L^-1
-        x = sla.solve_triangular(L, y, lower=True, check_finite=False)
-        x = sla.cho_solve((U, False), x, check_finite=False)
-        x = sla.solve_triangular(L, x, lower=True, trans="T", check_finite=False)
+        x = sla.cho_solve(self._chol, y, check_finite=False)
         x = x - Phi[:, rigid] @ (Phi[:, rigid].T @ y) / self.sigma
         x = x - Phi[:, el] @ ((Phi[:, el].T @ y) / (self.lam[el][:, None] if y.ndim == 2 else self.lam[el]))
         return x

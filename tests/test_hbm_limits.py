@@ -134,26 +134,6 @@ def test_receptance_residual_flexibility_and_rigid_modes():
     assert np.abs(got - ref).max() <= 1e-9 * np.abs(ref).max()
 
 
-def test_receptance_modes_have_a_sign_of_their_own():
-    """Each mode's sign is the receptance's, not LAPACK's: the largest entry of its contact shape
-    is positive, so the modes equal those of a dense generalized eigh of (K~, M) with the same
-    rule applied, whatever signs that eigh gave (a backbone depends on its mode's sign)."""
-    n = 12
-    M, K = chain(n)
-    dofs = np.array([[[3, -1, -1], [7, -1, -1]], [[5, -1, -1], [-1, -1, -1]]])
-    B = _contact_operator(dofs, n)
-    k0 = np.array([30.0, 0, 0, 0, 0, 0])
-    Bd = B.toarray()
-    G = Receptance(LinearStructure(M, K, 0.002 * K, n_modes=5), B, k0)
-    lam, Phi = sla.eigh(K + Bd.T @ np.diag(k0) @ Bd, M)
-    Phi = Phi[:, :5]
-    Psi = Bd @ Phi
-    sign = np.sign(Psi[np.argmax(np.abs(Psi), axis=0), np.arange(5)])
-    assert np.all(G.Psi[np.argmax(np.abs(G.Psi), axis=0), np.arange(5)] > 0)
-    assert np.abs(G.Phi - Phi * sign).max() <= 1e-9 * np.abs(Phi).max()
-    assert np.abs(G.Phi.T @ M @ G.Phi - np.eye(5)).max() <= 1e-10
-
-
 def test_receptances_of_two_contact_maps_on_one_structure():
     """The structure keeps W = L^-1 B^T for the last contact map only: receptances of two maps
     built in turn each equal the direct receptance B (K~ - w^2 M + i w C)^-1 B^T of their own."""
