@@ -125,8 +125,8 @@ def test_receptance_residual_flexibility_and_rigid_modes():
     for s_ in (s_full, s_trunc):
         G0 = Receptance(s_, B, k0).matrix(0, 1.0)
         assert abs(G0[0, 0].real - u_pinv) <= 1e-9 * abs(u_pinv)
-    # the static response of the discarded modes (from the structure's standard form) is their
-    # modal sum, taken from a dense generalized eigendecomposition of (K~, M)
+    # the static response of the discarded modes (the receptance's Cholesky solve minus its kept
+    # modes) is their modal sum, taken from a dense generalized eigendecomposition of (K~, M)
     lam, Phi = sla.eigh(Kb, M)
     y = np.linspace(-1.0, 1.0, n)
     ref = Phi[:, 4:] @ (Phi[:, 4:].T @ y / lam[4:])
@@ -135,8 +135,9 @@ def test_receptance_residual_flexibility_and_rigid_modes():
 
 
 def test_receptances_of_two_contact_maps_on_one_structure():
-    """The structure keeps W = L^-1 B^T for the last contact map only: receptances of two maps
-    built in turn each equal the direct receptance B (K~ - w^2 M + i w C)^-1 B^T of their own."""
+    """Receptances of two contact maps on one structure, built in turn (the structure keeps
+    them keyed by map and base stiffness), each equal the direct receptance
+    B (K~ - w^2 M + i w C)^-1 B^T of their own."""
     n = 12
     M, K = chain(n)
     C = 0.002 * K
