@@ -52,7 +52,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from . import friction_jit
+from . import friction_jit, shakedown
 from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 
@@ -66,6 +66,9 @@ USE_JIT = True
 #: ... and differentiate it with them too (else the numpy Jacobian; tests and
 #: scripts/bench_aft2d.py compare the two)
 JIT_JACOBIAN = True
+#: elements that can stick all cycle on a slider other than rest take the admissible one nearest
+#: rest (hbm.shakedown) instead of marching (False: the march from rest at t = 0, as before)
+SHAKEDOWN = True
 #: |det(I - A_cycle)| below which the slider fixed point is treated as neutral (plain iteration)
 NEWTON_DET = 1e-6
 #: cycle budget of the plain-repetition redo of neutral elements, × max_cycles
@@ -1332,20 +1335,31 @@ class FrictionContacts:
             raise ValueError(f"dofs must be < n = {n} (number of structure DOFs), got max {self.dofs.max()}")
 
     # ------------------------------------------------------------------ classification
-    def _classify(self, u: np.ndarray, idx: np.ndarray):
-        """Vectorized over samples: open-all and stuck-all (from rest, w = 0) masks."""
+    def _classify(self, u: np.ndarray, U: np.ndarray, idx: np.ndarray):
+        """Vectorized over samples: the elements open all cycle, and those stuck all cycle with
+        their slider (0 when stuck from rest, else the admissible slider nearest rest).
+
+        Args:
+            u: (k, 3, nt) samples of the elements idx; U: (k, 3, nH) their harmonics.
+
+        Returns:
+            open_all (k,) bool, stuck_all (k,) bool, w (k,) complex slider of the stuck, mm, and
+            times (k, 2) the instants whose disks fix w (shakedown.refine; nan for none: stuck
+            from rest).
+        """
         N = self.n0[idx, None] + self.kn[idx, None] * (u[:, 2] - self.gap[idx, None])
         open_all = np.all(N <= 0.0, axis=1)
         closed_all = np.all(N > 0.0, axis=1)
         T2 = self.kt[idx, None] ** 2 * (u[:, 0] ** 2 + u[:, 1] ** 2)
         stuck_all = closed_all & np.all(T2 <= (self.mu[idx, None] * N) ** 2, axis=1)
+        k, nt = len(idx), u.shape[2]
+        w, times = np.zeros(k, dtype=complex), np.full((k, 2), np.nan)
+        st = (np.arange(nt)[:, None] + _STENCIL) % nt
         c = np.nonzero(stuck_all)[0]
         if c.size:
             # as the march would find from w = 0: no excursion outside the limit, and no opening,
             # between the samples either (else the linear shortcut would jump where a sample
             # crosses the limit)
-            nt = u.shape[2]
-            st = (np.arange(nt)[:, None] + _STENCIL) % nt
             ut = u[c, 0] + 1j * u[c, 1]
             ct = ut[:, st] @ _VINV.T
             Nc = N[c][:, st] @ _VINV.T
@@ -1359,7 +1373,45 @@ class FrictionContacts:
                 over, _ = _stick_peak(ct[e, j], Lc[e, j], kt[e, j], np.zeros(e.size), np.zeros(e.size))
                 ok[e[over]] = False
             stuck_all[c[~ok]] = False
-        return open_all, stuck_all
+        if SHAKEDOWN:
+            self._shaken(u, U, idx, N, closed_all & ~stuck_all, st, stuck_all, w, times)
+        return open_all, stuck_all, w, times
+
+    def _shaken(self, u, U, idx, N, cand, st, stuck_all, w, times) -> None:
+        """Mark stuck (in place) the closed elements that can stick all cycle on some slider, with
+        the admissible slider nearest rest (hbm.shakedown: a march from rest at t = 0 made it
+        depend on where t = 0 falls in the cycle)."""
+        c = np.nonzero(cand & (self.mu[idx] > 0.0))[0]
+        if not c.size:
+            return
+        # closed between the samples too (an opening resets the slider: the march's business)
+        Nc = N[c][:, st] @ _VINV.T
+        ng = np.stack([_poly(tuple(np.moveaxis(Nc, -1, 0)), g) for g in _GAUSS], axis=-1)
+        c = c[(ng > 0.0).all(axis=(1, 2))]
+        if not c.size:
+            return
+        e = idx[c]
+        ut, rho = u[c, 0] + 1j * u[c, 1], self.mu[e, None] * N[c] / self.kt[e, None]
+        ws, act, ok = shakedown.nearest_admissible(ut, rho)
+        # stuck at every sample from rest (the march finds a slip between two): stuck from rest
+        rest = ok & (act[:, 0] < 0)
+        stuck_all[c[rest]] = True
+        s = np.nonzero(ok & ~rest)[0]
+        if not s.size:
+            return
+        Ct, R = self._path(U[c[s]], e[s])
+        ws, ts, ok = shakedown.refine(Ct, R, ws[s], act[s], ut[s], rho[s])
+        s = c[s[ok]]
+        stuck_all[s] = True
+        w[s], times[s] = ws[ok], ts[ok]
+
+    def _path(self, U: np.ndarray, e: np.ndarray):
+        """Harmonics of u_t1 + i u_t2 and of rho = mu N / kt (N = n0 + kn (u_n - g)) of the
+        elements e, (k, nH) each (shakedown's input)."""
+        g = self.mu[e] / self.kt[e]
+        R = (g * self.kn[e])[:, None] * U[:, 2]
+        R[:, 0] += g * (self.n0[e] - self.kn[e] * self.gap[e])
+        return U[:, 0] + 1j * U[:, 1], R
 
     # ------------------------------------------------------------------ time march
     def march(self, u: np.ndarray, idx: np.ndarray, fourier: Fourier | None = None,
@@ -1556,17 +1608,20 @@ class FrictionContacts:
             raise ValueError(f"U must have shape ({ne}, 3, {nH}), got {U.shape}")
         u = fourier.to_time(U)                                    # (ne, 3, nt)
         allidx = np.arange(ne)
-        open_all, stuck_all = self._classify(u, allidx)
+        open_all, stuck_all, w, times = self._classify(u, U, allidx)
         F = np.zeros((ne, 3, nH))
-        # stuck all cycle (slider at rest): exactly linear
+        # stuck all cycle: linear about the slider w (0: from rest)
         s = stuck_all
         F[s, 0:2] = self.kt[s, None, None] * U[s, 0:2]
+        F[s, 0, 0] -= self.kt[s] * w[s].real
+        F[s, 1, 0] -= self.kt[s] * w[s].imag
         F[s, 2] = self.kn[s, None] * U[s, 2]
         F[s, 2, 0] -= self.kn[s] * self.gap[s]
         # open all cycle: the structure still feels -n0
         F[open_all, 2, 0] = -self.n0[open_all]
         base = self.closed_at_rest
-        lin = (stuck_all & base) | (open_all & ~base)
+        shaken = np.isfinite(times[:, 0])
+        lin = (stuck_all & base & ~shaken) | (open_all & ~base)
         marched = np.nonzero(~(open_all | stuck_all))[0]
         nl = np.nonzero(~lin)[0]
         jac = None
@@ -1577,24 +1632,37 @@ class FrictionContacts:
             F[marched, 2] = fourier.to_freq(Nt - self.n0[marched, None])
         if not jacobian:
             return F, nl, None
-        DF = once(lambda: self._force_jacobian(nl, stuck_all, marched, jac, fourier))
+        sd = SimpleNamespace(U=U, w=w, times=times, shaken=shaken)
+        DF = once(lambda: self._force_jacobian(nl, stuck_all, marched, jac, fourier, sd))
         return F, nl, (DF if deferred else DF())
 
     def _force_jacobian(self, nl: np.ndarray, stuck_all: np.ndarray, marched: np.ndarray, jac,
-                        fourier: Fourier) -> np.ndarray:
+                        fourier: Fourier, sd: SimpleNamespace) -> np.ndarray:
         """The blocks dF/dU of the elements nl (see :meth:`evaluate`): k_t, k_n for the stuck
-        elements outside the linear base, the march's Jacobian (``jac()``) for the marched."""
+        elements outside the linear base (less k_t dw/dU on the mean tangential force where the
+        slider is not at rest, ``sd``: harmonics, sliders and active instants of ``_classify``), the
+        march's Jacobian (``jac()``) for the marched."""
         nH = fourier.nH
         DF = np.zeros((nl.size, 3 * nH, 3 * nH))
         pos = np.full(self.ne, -1)
         pos[nl] = np.arange(nl.size)
-        # stuck elements that are not in the base (closed only under vibration): kt, kn
-        sx = np.nonzero(stuck_all & ~self.closed_at_rest)[0]
+        # stuck elements that are not in the base (closed only under vibration), or that stick
+        # on a slider other than rest: kt, kn
+        sx = np.nonzero(stuck_all & (~self.closed_at_rest | sd.shaken))[0]
         if sx.size:
             eye = np.eye(nH)
             blk = np.zeros((sx.size, 3 * nH, 3 * nH))
             for dd, kk in enumerate((self.kt[sx], self.kt[sx], self.kn[sx])):
                 blk[:, dd * nH:(dd + 1) * nH, dd * nH:(dd + 1) * nH] = kk[:, None, None] * eye
+            sh = np.nonzero(sd.shaken[sx])[0]
+            if sh.size:
+                e = sx[sh]
+                Ct, R = self._path(sd.U[e], e)
+                dw = shakedown.slider_jacobian(Ct, R, sd.w[e], sd.times[e],
+                                               self.mu[e] * self.kn[e] / self.kt[e])
+                # T = kt (u_t - w): w is constant in time, so it moves the mean (harmonic 0) only
+                blk[sh, 0] -= self.kt[e, None] * dw[:, 0]
+                blk[sh, nH] -= self.kt[e, None] * dw[:, 1]
             DF[pos[sx]] = blk
         if marched.size:
             dT, dN = jac()
@@ -1617,10 +1685,11 @@ class FrictionContacts:
         ne = self.ne
         u = fourier.to_time(U)
         allidx = np.arange(ne)
-        open_all, stuck_all = self._classify(u, allidx)
+        open_all, stuck_all, w, _ = self._classify(u, U, allidx)
         Nt = np.maximum(0.0, self.n0[:, None] + self.kn[:, None] * (u[:, 2] - self.gap[:, None]))
         T = np.zeros((ne, 2, fourier.nt))
-        T[stuck_all] = self.kt[stuck_all, None, None] * u[stuck_all, 0:2]
+        s = stuck_all
+        T[s] = self.kt[s, None, None] * (u[s, 0:2] - np.stack([w[s].real, w[s].imag], axis=1)[:, :, None])
         slip = np.zeros((ne, fourier.nt), dtype=bool)
         marched = np.nonzero(~(open_all | stuck_all))[0]
         if marched.size:

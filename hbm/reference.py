@@ -14,6 +14,9 @@
   and Brent's method; the map period -> period is iterated to the periodic steady state.
 * ``circular_orbit_force``: closed-form steady force of one 3D friction element (circular
   Coulomb limit) whose tangential displacement runs on a circle at constant normal load.
+* ``shakedown_slider_1d`` and ``shakedown_slider_circle``: the admissible slider nearest rest of
+  an element that sticks all cycle (hbm.shakedown) for u_t = m + a cos t along a line, and on a
+  circle of radius r about m, at constant limit: the ends of an interval, the centre of a disk.
 * ``coulomb_element_reference``: fine adaptive time integration of 3D friction elements (the
   element of ``friction.py``: circular limit mu N, normal spring with separation and slider
   reset) along a prescribed periodic path, events located by root finding, steady state by
@@ -289,6 +292,25 @@ def circular_orbit_force(theta, radius: float, kt: float, fs: float):
         return kt * radius * np.stack([np.cos(th), np.sin(th)]), 0.0
     phi = float(np.arccos(fs / (kt * radius)))
     return fs * np.stack([np.cos(th + phi), np.sin(th + phi)]), phi
+
+
+def shakedown_slider_1d(mean: float, amp: float, rho: float) -> float:
+    """The admissible slider nearest 0 for u_t = mean + amp cos t (a line) at constant radius rho
+    = mu N / kt: w must keep |u_t - w| <= rho all cycle, w in [mean + |amp| - rho, mean - |amp| +
+    rho] (requires |amp| <= rho), mm."""
+    lo, hi = mean + abs(amp) - rho, mean - abs(amp) + rho
+    if lo > hi:
+        raise ValueError("the element slips: |amp| > rho")
+    return float(min(max(0.0, lo), hi))
+
+
+def shakedown_slider_circle(centre: complex, r: float, rho: float) -> complex:
+    """The admissible slider nearest 0 for u_t = centre + r e^{it} (a circle) at constant rho:
+    the admissible set is the disk of radius rho - r about the centre (requires r <= rho), mm."""
+    if r > rho:
+        raise ValueError("the element slips: r > rho")
+    d = abs(centre)
+    return complex(0.0) if d <= rho - r else complex(centre * (1.0 - (rho - r) / d))
 
 
 class _Path:

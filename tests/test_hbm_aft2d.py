@@ -55,7 +55,7 @@ def reclosing(f: Fourier) -> np.ndarray:
 def marched(c: FrictionContacts, U: np.ndarray, f: Fourier):
     """Step tables and closing-cycle record of the elements of U that are marched."""
     u = f.to_time(U)
-    open_all, stuck_all = c._classify(u, np.arange(c.ne))
+    open_all, stuck_all = c._classify(u, U, np.arange(c.ne))[:2]
     m = np.nonzero(~(open_all | stuck_all))[0]
     tab = friction._StepTables(u[m], c.kt[m], c.mu[m], c.kn[m], c.n0[m], c.gap[m])
     return tab, c._forward(tab, True, 200, False)[0]
@@ -391,7 +391,7 @@ def test_compiled_repetition_equals_the_python_loop():
     for U, f in [(switch_chains(), Fourier(3, 16)), (ellipses(), Fourier(2, 64))]:
         c = contacts(len(U))
         u = f.to_time(U)
-        open_all, stuck_all = c._classify(u, np.arange(c.ne))
+        open_all, stuck_all = c._classify(u, U, np.arange(c.ne))[:2]
         m = np.nonzero(~(open_all | stuck_all))[0]
         sets.append((contacts(m.size), u[m], f))
     periods = []
