@@ -17,6 +17,9 @@
 * ``shakedown_slider_1d`` and ``shakedown_slider_circle``: the admissible slider nearest rest of
   an element that sticks all cycle (hbm.shakedown) for u_t = m + a cos t along a line, and on a
   circle of radius r about m, at constant limit: the ends of an interval, the centre of a disk.
+* ``ramped_slider``: the slider an element is left with when its whole motion grows slowly from
+  rest (a linear ramp over many periods, then held): Moreau's catching-up algorithm for the
+  sweeping process of the slider by the moving stick disk, on a fine time grid.
 * ``coulomb_element_reference``: fine adaptive time integration of 3D friction elements (the
   element of ``friction.py``: circular limit mu N, normal spring with separation and slider
   reset) along a prescribed periodic path, events located by root finding, steady state by
@@ -311,6 +314,45 @@ def shakedown_slider_circle(centre: complex, r: float, rho: float) -> complex:
         raise ValueError("the element slips: r > rho")
     d = abs(centre)
     return complex(0.0) if d <= rho - r else complex(centre * (1.0 - (rho - r) / d))
+
+
+def ramped_slider(U: np.ndarray, kt, kn, mu, n0, gap=0.0, ramp_periods: int = 100,
+                  hold_periods: int = 10, steps: int = 1000) -> np.ndarray:
+    """Slider of closed friction elements after their motion r(t) u(t) grew from rest.
+
+    r rises linearly from 0 to 1 over ``ramp_periods`` periods and stays 1 for ``hold_periods``.
+    While the element is closed the stuck force kt (u_t - w) must stay in the disk of radius
+    mu N: at each step w moves to the nearest point of the disk |u_t - w| <= mu N / kt (Moreau's
+    catching-up algorithm; exact as the steps shrink). No separation (N > 0 is required).
+
+    Args:
+        U: (k, 3, nH) harmonics of (u_t1, u_t2, u_n) (hbm.fourier's layout: 1, cos t, sin t, ...), mm.
+        kt, kn, mu, n0, gap: element parameters (scalars or (k,)).
+        ramp_periods, hold_periods, steps: periods of the ramp and of the hold, steps per period.
+
+    Returns:
+        (k,) complex slider w1 + i w2 at the end, mm.
+    """
+    k, _, nH = U.shape
+    kt, kn, mu, n0, gap = (np.broadcast_to(np.asarray(x, dtype=float), (k,)) for x in (kt, kn, mu, n0, gap))
+    w = np.zeros(k, dtype=complex)
+    n = (ramp_periods + hold_periods) * steps
+    h = np.arange(1, (nH - 1) // 2 + 1)
+    Ut = U[:, 0] + 1j * U[:, 1]
+    for i in range(1, n + 1):
+        t = 2.0 * np.pi * i / steps
+        e = np.concatenate([[1.0], np.stack([np.cos(h * t), np.sin(h * t)], axis=1).ravel()])
+        r = min(i / (ramp_periods * steps), 1.0)
+        ut, un = r * (Ut @ e), r * (U[:, 2] @ e)
+        N = n0 + kn * (un - gap)
+        if np.any(N <= 0.0):
+            raise ValueError("the element opens: ramped_slider needs N > 0 all along")
+        rho = mu * N / kt
+        d = w - ut
+        ad = np.abs(d)
+        out = ad > rho
+        w[out] = ut[out] + d[out] * (rho[out] / ad[out])
+    return w
 
 
 class _Path:
