@@ -66,9 +66,6 @@ USE_JIT = True
 #: ... and differentiate it with them too (else the numpy Jacobian; tests and
 #: scripts/bench_aft2d.py compare the two)
 JIT_JACOBIAN = True
-#: elements that can stick all cycle on a slider other than rest take the admissible one nearest
-#: rest (hbm.shakedown) instead of marching (False: the march from rest at t = 0, as before)
-SHAKEDOWN = True
 #: |det(I - A_cycle)| below which the slider fixed point is treated as neutral (plain iteration)
 NEWTON_DET = 1e-6
 #: cycle budget of the plain-repetition redo of neutral elements, × max_cycles
@@ -1318,6 +1315,11 @@ class FrictionContacts:
             raise ValueError(f"close_tol must be in (0, 1), got {close_tol}")
         self.close_tol = float(close_tol)
         self.max_cycles = int(max_cycles)
+        #: elements that can stick all cycle on a slider other than rest take the admissible one
+        #: nearest rest (hbm.shakedown), independent of the time origin, and are not marched;
+        #: False (default): the march from rest at t = 0 decides. A forced response's t = 0 is the
+        #: excitation's; a nonlinear mode has none, and continue_backbone sets this for its run
+        self.shakedown = False
         #: how often a neutral element kept its Newton-closed periodic state (see ``march``)
         self.neutral_kept = 0
         #: closed at rest (u = 0): these contribute their stuck stiffness to the linear base
@@ -1373,7 +1375,7 @@ class FrictionContacts:
                 over, _ = _stick_peak(ct[e, j], Lc[e, j], kt[e, j], np.zeros(e.size), np.zeros(e.size))
                 ok[e[over]] = False
             stuck_all[c[~ok]] = False
-        if SHAKEDOWN:
+        if self.shakedown:
             self._shaken(u, U, idx, N, closed_all & ~stuck_all, st, stuck_all, w, times)
         return open_all, stuck_all, w, times
 

@@ -556,6 +556,20 @@ def continue_backbone(hb, mode: int, amplitudes, dof: int, *, n_points: int = 40
         raise ValueError(f"n_points must be an integer >= 2, got {n_points!r}")
     if isinstance(dof, bool) or int(dof) != dof or not (0 <= dof < hb.s.n):
         raise ValueError(f"dof must be an integer in [0, {hb.s.n - 1}], got {dof!r}")
+    # a mode has no time origin (its sign is arbitrary, and flipping it moves the motion by half
+    # a period): the elements that stick all cycle after slipping take the slider nearest rest,
+    # which does not depend on it (hbm.shakedown); forced responses keep the march from rest at
+    # the excitation's t = 0
+    prev, hb.c.shakedown = hb.c.shakedown, True
+    try:
+        return _continue(hb, mode, a0, a1, dof, int(n_points), tol, max_iter, max_halvings, partial, t0)
+    finally:
+        hb.c.shakedown = prev
+
+
+def _continue(hb, mode: int, a0: float, a1: float, dof: int, n_points: int, tol, max_iter,
+              max_halvings: int, partial: bool, t0: float) -> Backbone:
+    """continue_backbone's continuation (its arguments checked; t0 its start, perf_counter)."""
     prob = NonlinearModeProblem(hb, mode, tol, max_iter)
     targets = np.geomspace(a0, a1, int(n_points))
     onset = prob.onset_amplitude()

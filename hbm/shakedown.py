@@ -212,6 +212,8 @@ def _refine_two(Ct, R, w, ta, tb):
     return w, ta, tb, conv
 
 
+#: two active instants closer than this (rad) have merged into one: retried as one
+MERGED = 1e-6
 #: rounds of the refinement's own active-set step (a sample violated by the refined point joins)
 REFINE_ROUNDS = 6
 
@@ -284,8 +286,10 @@ def refine(Ct: np.ndarray, R: np.ndarray, w: np.ndarray, active: np.ndarray, c: 
 
 
 def _refine_basis(Ct, R, w, times, nt: int):
-    """Newton on the active instants (one: _refine_one, two: _refine_two; two that merge, or do
-    not converge, are retried as one from the one with the larger excess).
+    """Newton on the active instants (one: _refine_one, two: _refine_two; two that merge (MERGED),
+    or do not converge, are retried as one from the one with the larger excess). Two instants may
+    lie within a sample spacing of each other: where the orbit turns sharply the stick disks'
+    envelope has a corner between two samples.
 
     Returns w, times, converged (rows)."""
     k = len(w)
@@ -293,7 +297,7 @@ def _refine_basis(Ct, R, w, times, nt: int):
     two = np.nonzero(np.isfinite(times[:, 1]))[0]
     if two.size:
         w2, ta, tb, c2 = _refine_two(Ct[two], R[two], w[two], times[two, 0], times[two, 1])
-        c2 &= np.abs(np.angle(np.exp(1j * (ta - tb)))) > 2.0 * np.pi / nt
+        c2 &= np.abs(np.angle(np.exp(1j * (ta - tb)))) > MERGED
         w[two[c2]] = w2[c2]
         times[two[c2], 0], times[two[c2], 1] = ta[c2], tb[c2]
         conv[two[c2]] = True
