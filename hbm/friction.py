@@ -36,6 +36,9 @@ before was 1st order); the least accurate steps are those right after a closing 
 the slip equation is singular (L = 0). The harmonics keep the O(h^2) aliasing of the force's
 kinks (scripts/bench_aft2d.py).
 
+With ``shakedown`` (nonlinear modes, which have no time origin), a closed element that can stick
+all cycle on some slider takes the admissible slider nearest rest (hbm.shakedown) and is not
+marched: the march's choice depends on where t = 0 falls in the cycle.
 Elements that stay closed and within the cone all along the path from w = 0 (stuck) or open at every
 sample are recognized by a vectorized test and never marched: stuck elements are exactly linear
 (T = kt u_t), open ones carry the constant -n0. The analytic Jacobian of the force harmonics is

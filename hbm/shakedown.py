@@ -10,7 +10,9 @@ so the periodic (harmonic balance) state does not fix w: the history does. A mar
 a mode's sign (arbitrary in an eigensolver) moves a backbone's motion by half a period against
 t = 0, and so moved the backbone's results (docs/design.md, "Friction dynamics").
 
-Here w is the admissible slider nearest its rest position w = 0, the projection of 0 on C: the
+Where the motion has no time origin, a nonlinear mode (``FrictionContacts.shakedown``, set by
+``nonlinear_mode.continue_backbone``; a forced response has the excitation's), w is the
+admissible slider nearest its rest position w = 0, the projection of 0 on C: the
 least slip that lets the element stick all cycle. It is what a vibration that grows slowly from
 rest leaves in 1D (the slider is pushed to the nearer end of the admissible interval), it does not
 depend on the time origin, and it is continuous in the motion: 0 while the element sticks from

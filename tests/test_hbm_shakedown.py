@@ -167,3 +167,26 @@ def test_the_slider_is_near_what_a_slow_growth_from_rest_leaves():
     sh = np.nonzero(np.isfinite(times[:, 0]))[0]
     wr = ramped_slider(U[sh], c.kt[sh], c.kn[sh], c.mu[sh], c.n0[sh], c.gap[sh], steps=2000)
     assert (np.abs(wr - w[sh]) <= 0.05 * np.abs(w[sh])).all(), np.abs(wr - w[sh]) / np.abs(w[sh])
+
+
+def test_nonlinear_modes_use_the_nearest_rest_slider_and_forced_responses_the_march():
+    """continue_backbone evaluates the friction with ``shakedown`` set (a mode has no time
+    origin) and restores the contacts' setting after, also when it fails; a forced solve keeps
+    the march (the excitation's t = 0)."""
+    from test_hbm_nonlinear_mode import jenkins_1dof
+    hb = jenkins_1dof(1, 64)
+    seen = []
+    orig = hb.c.evaluate
+
+    def evaluate(*a, **k):
+        seen.append(hb.c.shakedown)
+        return orig(*a, **k)
+    hb.c.evaluate = evaluate
+    hb.nonlinear_mode(0, (0.05, 1.0), dof=0, n_points=4)
+    assert seen and all(seen) and hb.c.shakedown is False
+    seen.clear()
+    with pytest.raises(ValueError):
+        hb.nonlinear_mode(0, (0.05, 1.0), dof=0, n_points=4, max_iter=0)
+    assert hb.c.shakedown is False
+    hb.solve(1.0, np.array([0.1]))
+    assert seen and not any(seen)
