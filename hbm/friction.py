@@ -1342,7 +1342,8 @@ class FrictionContacts:
     # ------------------------------------------------------------------ classification
     def _classify(self, u: np.ndarray, U: np.ndarray, idx: np.ndarray):
         """Vectorized over samples: the elements open all cycle, and those stuck all cycle with
-        their slider (0 when stuck from rest, else the admissible slider nearest rest).
+        their slider (0 when stuck from rest; with ``shakedown``, the admissible slider nearest
+        rest of those that can stick all cycle only after slipping).
 
         Args:
             u: (k, 3, nt) samples of the elements idx; U: (k, 3, nH) their harmonics.
@@ -1367,8 +1368,7 @@ class FrictionContacts:
             # crosses the limit)
             ut = u[c, 0] + 1j * u[c, 1]
             ct = ut[:, st] @ _VINV.T
-            Nc = N[c][:, st] @ _VINV.T
-            ng = np.stack([_poly(tuple(np.moveaxis(Nc, -1, 0)), g) for g in _GAUSS], axis=-1)
+            Nc, ng = _gauss_normal(N[c], st)
             Lc = self.mu[idx[c], None, None] * Nc
             kt = np.broadcast_to(self.kt[idx[c], None], ut.shape)
             ok = (ng > 0.0).all(axis=(1, 2)) | (self.mu[idx[c]] == 0.0)
@@ -1390,9 +1390,7 @@ class FrictionContacts:
         if not c.size:
             return
         # closed between the samples too (an opening resets the slider: the march's business)
-        Nc = N[c][:, st] @ _VINV.T
-        ng = np.stack([_poly(tuple(np.moveaxis(Nc, -1, 0)), g) for g in _GAUSS], axis=-1)
-        c = c[(ng > 0.0).all(axis=(1, 2))]
+        c = c[(_gauss_normal(N[c], st)[1] > 0.0).all(axis=(1, 2))]
         if not c.size:
             return
         e = idx[c]
@@ -1709,6 +1707,13 @@ class FrictionContacts:
         status[closed.any(axis=1) & ~closed.all(axis=1)] = PARTLY_OPEN
         status[~closed.any(axis=1)] = OPEN
         return {"u_t": u[:, 0:2].copy(), "T": T, "N": Nt, "status": status, "slip_fraction": frac}
+
+
+def _gauss_normal(N: np.ndarray, st: np.ndarray):
+    """Cubic coefficients (k, nt, 4) of n0 + kn (u_n - g) on each step (samples N (k, nt),
+    stencil st) and its values at the steps' two Gauss points (k, nt, 2)."""
+    Nc = N[:, st] @ _VINV.T
+    return Nc, np.stack([_poly(tuple(np.moveaxis(Nc, -1, 0)), g) for g in _GAUSS], axis=-1)
 
 
 # ---------------------------------------------------------------------------- Jacobian of a march
