@@ -251,7 +251,7 @@ def refine(Ct: np.ndarray, R: np.ndarray, w: np.ndarray, active: np.ndarray, c: 
         r = np.nonzero(live)[0]
         if not r.size:
             break
-        wr, tr, conv = _refine_basis(Ct[r], R[r], w[r], times[r], nt)
+        wr, tr, conv = _refine_basis(Ct[r], R[r], w[r], times[r])
         w[r], times[r] = wr, tr
         live[r[~conv]] = False
         r = r[conv]
@@ -287,7 +287,7 @@ def refine(Ct: np.ndarray, R: np.ndarray, w: np.ndarray, active: np.ndarray, c: 
     return w, times, ok
 
 
-def _refine_basis(Ct, R, w, times, nt: int):
+def _refine_basis(Ct, R, w, times):
     """Newton on the active instants (one: _refine_one, two: _refine_two; two that merge (MERGED),
     or do not converge, are retried as one from the one with the larger excess). Two instants may
     lie within a sample spacing of each other: where the orbit turns sharply the stick disks'
