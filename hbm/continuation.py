@@ -32,6 +32,10 @@
 * Step length grows x1.5 after <= 3 corrector iterations, shrinks x0.7 after >= 7, halves on failure;
   ``ConvergenceError`` below ds_min. Turning points (sign changes of the w-component of the tangent)
   are listed in ``FRFResult.turning_points``.
+* Retraces: a corrected point on the last few segments turns the tangent round once
+  (``_retraces``); one on a part of the branch traced long before means the branch went back
+  onto itself: on at ``tight_tol`` from THRASH_POINTS back (as below ds_min), or a
+  ``ConvergenceError`` (``_turned_back``).
 
 Code layout (predictor / corrector / step control kept apart, as in pyHarm): the settings are a
 frozen, validated :class:`ContinuationSettings`; :class:`_Scaling` maps (U, w) to Y; ``_tangent``
@@ -94,6 +98,8 @@ THRASH_PROGRESS = 0.25
 #: how many segments of the branch before the current point a new point is checked against
 #: (``_Branch._retraces``)
 RETRACE_SEGMENTS = 8
+#: a new point within this fraction of a segment's length of a segment retraces it
+RETRACE_DISTANCE = 0.1
 #: a branch that starts on the GMRES path with a reduced system of at most this many unknowns
 #: takes its determinant sign there, by a dense LU (~0.1 s): a sign is a branch invariant, and
 #: the first corner or sharp turn would otherwise need one at the point before it, where many
@@ -429,6 +435,51 @@ def _stability(hb, sols: list, turning: list[int], stability: str) -> tuple[np.n
 
 
 # ---------------------------------------------------------------------------------- one run
+class _Path:
+    """The accepted points of a branch in their raw unknowns (U raveled, mm; w, rad/s) and each
+    segment's raw ‖ΔU‖, so that a new point is compared with the whole branch in the current
+    scaling without converting every Solution again (``_Branch._turned_back``)."""
+
+    def __init__(self) -> None:
+        self.rows: list[np.ndarray] = []
+        self.w: list[float] = []
+        self.du: list[float] = []          # segment j joins points j and j + 1
+
+    def append(self, U: np.ndarray, w: float) -> None:
+        """Add the next accepted point."""
+        r = np.array(U, dtype=float).ravel()
+        if self.rows:
+            self.du.append(float(np.linalg.norm(r - self.rows[-1])))
+        self.rows.append(r)
+        self.w.append(float(w))
+
+    def truncate(self, k: int) -> None:
+        """Keep the first k points."""
+        del self.rows[k:], self.w[k:], self.du[max(k - 1, 0):]
+
+    def retraces(self, U: np.ndarray, w: float, sc: "_Scaling", segments: int) -> bool:
+        """Whether (U, w) lies within RETRACE_DISTANCE of a segment's length of one of the first
+        ``segments`` segments (scaled by ``sc``). Only segments whose frequency range, widened by
+        that distance, holds w are measured in full."""
+        m = min(segments, len(self.du))
+        if m < 1:
+            return False
+        ws = np.asarray(self.w[:m + 1])
+        dw = np.diff(ws)
+        length = np.hypot(np.asarray(self.du[:m]) / sc.us, dw / sc.ws)
+        slack = RETRACE_DISTANCE * length * sc.ws
+        near = (w >= np.minimum(ws[:-1], ws[1:]) - slack) & (w <= np.maximum(ws[:-1], ws[1:]) + slack)
+        y = sc.Y(U, w)
+        for j in np.nonzero(near & (length > 0))[0]:
+            a = np.append(self.rows[j] / sc.us, ws[j] / sc.ws)
+            d = np.append(self.rows[j + 1] / sc.us, ws[j + 1] / sc.ws) - a
+            L2 = float(d @ d)
+            u = min(max(float((y - a) @ d) / L2, 0.0), 1.0)
+            if np.linalg.norm(y - a - u * d) <= RETRACE_DISTANCE * np.sqrt(L2):
+                return True
+        return False
+
+
 class _Branch:
     """State of one continuation run: current point (U, w), tangent t, step ds, points so far.
 
@@ -470,6 +521,8 @@ class _Branch:
         self.keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
         self.t_beyond = None      # tangent of the piece beyond the last corner restart
         self.sols, self.taus = [sol], [self.t[-1]]
+        self.path = _Path()
+        self.path.append(self.U, w0)
         self.amp_prev = sol.amplitude(dof)
         self.amps = [self.amp_prev]
         self.turns: list[bool] = []   # per accepted point: turned sharply or beyond a corner
@@ -509,6 +562,16 @@ class _Branch:
             if not plain and corr.ev is not None:     # None: the predictor's march did not close
                 corr, beyond = self._corner_restart(Y, Yp, corr)
             if (plain or beyond) and self._amplitude_step_ok(corr):
+                if self._turned_back(corr):
+                    # the loose tolerance's points may be what the fold cannot be passed from,
+                    # as below ds_min: on at the tight one from THRASH_POINTS back; or give up
+                    # now (the sweep's caller runs it again at the strict tolerances)
+                    if self._tighten():
+                        Y, flipped = self.sc.Y(self.U, self.w), False
+                        continue
+                    res = float(np.linalg.norm(corr.ev.R) / corr.ev.scale)
+                    raise ConvergenceError("the continuation turned back onto its branch near "
+                                           f"omega = {self.w:.6g} rad/s", res)
                 if flipped or not self._retraces(corr):
                     return corr, beyond
                 # the step went back along the branch already traced: the tangent here points
@@ -545,9 +608,19 @@ class _Branch:
             if L2 == 0:
                 continue
             u = min(max(float((y - a) @ d) / L2, 0.0), 1.0)
-            if np.linalg.norm(y - a - u * d) <= 0.1 * np.sqrt(L2):
+            if np.linalg.norm(y - a - u * d) <= RETRACE_DISTANCE * np.sqrt(L2):
                 return True
         return False
+
+    def _turned_back(self, corr: _Correction) -> bool:
+        """True if the corrected point lies on a part of the branch traced more than
+        ``RETRACE_SEGMENTS`` points before the current one (``_Path.retraces``): the branch has
+        turned back onto itself, beyond what :meth:`_retraces` (a step back, turned round once)
+        mends. On a quick-preset model smooth-ms's top-level sweep crawled at a corner for 20
+        points (ds 1e-4), then went back down the branch it had come up, and retraced 140
+        points to below the band before the sweep failed and was run again at the strict
+        tolerances (29 of its 43 s; issue 16, session 20)."""
+        return self.path.retraces(corr.U, corr.w, self.sc, len(self.sols) - 1 - RETRACE_SEGMENTS)
 
     def _amplitude_step_ok(self, corr: _Correction) -> bool:
         """The arc length lives on the contact unknowns; the response DOF may resonate in a mode
@@ -644,6 +717,7 @@ class _Branch:
         # the reference of the next orientation: this point's sign, found or carried
         self.U, self.w, self.t, self.ref_sign = corr.U, corr.w, t, sign
         self.sols.append(self._solution(corr))
+        self.path.append(corr.U, corr.w)
         self.amp_prev = self.sols[-1].amplitude(self.dof)
         self.taus.append(self.t[-1])
         self.ds = _adapt_step(self.ds, corr.it, self.settings.ds_max)
@@ -683,9 +757,11 @@ class _Branch:
             return True
         t, sign = _tangent(hb, self.force, self.sc, corr.w, corr.ev, sec, None)
         del self.sols[k:], self.taus[k:], self.amps[k:]
+        self.path.truncate(k)
         self.turns[k - 1:] = [False]          # one per point after the first, the new one's too
         self.U, self.w, self.t, self.ref_sign, self.t_beyond = corr.U, corr.w, t, sign, None
         self.sols.append(self._solution(corr))
+        self.path.append(corr.U, corr.w)
         self.amp_prev = self.sols[-1].amplitude(self.dof)
         self.amps.append(self.amp_prev)
         self.taus.append(self.t[-1])

@@ -285,7 +285,9 @@ def test_a_step_below_ds_min_goes_back_and_on_at_the_tight_tolerance(monkeypatch
             return cont._Correction(False, U, w, None, 0)
         return real(hb, force, sc, Yp, t, max_corrector)
     monkeypatch.setattr(cont, "_correct", blocked)
-    with pytest.raises(ConvergenceError, match="ds_min"):
+    # the steps zigzag at 1.0 until one lands on the branch traced more than RETRACE_SEGMENTS
+    # points back (or ds falls below ds_min first)
+    with pytest.raises(ConvergenceError, match="ds_min|turned back onto its branch"):
         HarmonicBalance(s, c, harmonics=1, samples=32, tol=loose).frf(0.4, 2.5, f, dof=0,
                                                                       stability="none")
     hb = HarmonicBalance(s, c, harmonics=1, samples=32, tol=loose)
@@ -532,6 +534,40 @@ def test_a_point_on_the_branch_already_traced_is_a_retrace():
     assert not retraces(corr(6.0, 1.45))                 # back in ω, on in U: a fold
     assert not retraces(corr(4.5, 1.45))                 # the current segment itself is not checked
 
+
+
+def test_a_point_on_the_branch_traced_long_before_is_a_turn_back():
+    """``_Branch._turned_back``: a corrected point on a segment that ends more than
+    RETRACE_SEGMENTS points before the current one means the branch went back onto itself (a
+    crawl of many small steps at a corner hides it from ``_retraces``' window); a point ahead, a
+    fold's Z (the same frequency, another response) and a step back onto the last segments
+    (``_retraces``' case) are not. ``_Path.truncate`` keeps the points and segments in step."""
+    from types import SimpleNamespace
+
+    from hbm import continuation as cn
+    # a branch along U from (U, w) = (0, 1) to (30, 4), the current point last
+    pts = [(float(u), 1.0 + 0.1 * u) for u in range(31)]
+    path = cn._Path()
+    for u, w in pts:
+        path.append(np.array([[u]]), w)
+    sols = [SimpleNamespace(contact=np.array([[u]]), omega=w) for u, w in pts]
+    br = SimpleNamespace(sols=sols, path=path, sc=cn._Scaling(1.0, 1.0, (1, 1)),
+                         hb=SimpleNamespace(from_contact=lambda c: np.asarray(c, float)))
+
+    def corr(u, w):
+        return cn._Correction(True, np.array([[u]]), w, None, 1)
+    back = lambda c: cn._Branch._turned_back(br, c)      # noqa: E731
+    window = lambda c: cn._Branch._retraces(br, c)       # noqa: E731
+    far = corr(12.5, 2.25)
+    assert back(far) and not window(far)
+    near = corr(27.5, 3.75)                              # on the last segments: _retraces' case
+    assert window(near) and not back(near)
+    assert not back(corr(31.0, 4.1))                     # ahead
+    assert not back(corr(31.0, 2.25))                    # a fold's Z: that frequency, another U
+    path.truncate(13)
+    assert len(path.rows) == len(path.w) == 13 and len(path.du) == 12
+    assert not cn._Path.retraces(path, np.array([[12.5]]), 2.25, br.sc, 12)   # no segment 12 now
+    assert cn._Path.retraces(path, np.array([[11.5]]), 2.15, br.sc, 12)
 
 
 def test_a_corner_restart_with_a_small_turn_takes_no_lu(monkeypatch):
