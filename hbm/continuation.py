@@ -438,7 +438,7 @@ def _stability(hb, sols: list, turning: list[int], stability: str) -> tuple[np.n
 class _Path:
     """The accepted points of a branch in their raw unknowns (U raveled, mm; w, rad/s) and each
     segment's raw ‖ΔU‖, so that a new point is compared with the whole branch in the current
-    scaling without converting every Solution again (``_Branch._turned_back``)."""
+    scaling without converting every Solution again (``_Branch._retraces``, ``_turned_back``)."""
 
     def __init__(self) -> None:
         self.rows: list[np.ndarray] = []
@@ -457,22 +457,22 @@ class _Path:
         """Keep the first k points."""
         del self.rows[k:], self.w[k:], self.du[max(k - 1, 0):]
 
-    def retraces(self, U: np.ndarray, w: float, sc: "_Scaling", segments: int) -> bool:
-        """Whether (U, w) lies within RETRACE_DISTANCE of a segment's length of one of the first
-        ``segments`` segments (scaled by ``sc``). Only segments whose frequency range, widened by
-        that distance, holds w are measured in full."""
-        m = min(segments, len(self.du))
-        if m < 1:
+    def retraces(self, U: np.ndarray, w: float, sc: "_Scaling", first: int, stop: int) -> bool:
+        """Whether (U, w) lies within RETRACE_DISTANCE of a segment's length of one of the
+        segments first … stop - 1 (scaled by ``sc``). Only segments whose frequency range,
+        widened by that distance, holds w are measured in full."""
+        first, stop = max(first, 0), min(stop, len(self.du))
+        if stop <= first:
             return False
-        ws = np.asarray(self.w[:m + 1])
-        dw = np.diff(ws)
-        length = np.hypot(np.asarray(self.du[:m]) / sc.us, dw / sc.ws)
+        ws = np.asarray(self.w[first:stop + 1])
+        length = np.hypot(np.asarray(self.du[first:stop]) / sc.us, np.diff(ws) / sc.ws)
         slack = RETRACE_DISTANCE * length * sc.ws
         near = (w >= np.minimum(ws[:-1], ws[1:]) - slack) & (w <= np.maximum(ws[:-1], ws[1:]) + slack)
         y = sc.Y(U, w)
-        for j in np.nonzero(near & (length > 0))[0]:
-            a = np.append(self.rows[j] / sc.us, ws[j] / sc.ws)
-            d = np.append(self.rows[j + 1] / sc.us, ws[j + 1] / sc.ws) - a
+        for i in np.nonzero(near & (length > 0))[0]:
+            j = first + i
+            a = np.append(self.rows[j] / sc.us, ws[i] / sc.ws)
+            d = np.append(self.rows[j + 1] / sc.us, ws[i + 1] / sc.ws) - a
             L2 = float(d @ d)
             u = min(max(float((y - a) @ d) / L2, 0.0), 1.0)
             if np.linalg.norm(y - a - u * d) <= RETRACE_DISTANCE * np.sqrt(L2):
@@ -595,22 +595,11 @@ class _Branch:
     def _retraces(self, corr: _Correction) -> bool:
         """True if the corrected point lies on the branch already traced before the current
         point: within a tenth of a segment's length of one of the last ``RETRACE_SEGMENTS``
-        segments that end before it (scaled unknowns). On 1 rank smooth-ms's top-level sweep of
-        the quick model stepped from 0.568 mm back to 0.470 mm at a corner fold and traced
-        0.47 → 0.57 mm a second time (five points more than on 2 ranks)."""
-        if len(self.sols) < 3:
-            return False
-        ys = [self.sc.Y(self.hb.from_contact(p.contact), p.omega) for p in self.sols[-RETRACE_SEGMENTS - 1:-1]]
-        y = self.sc.Y(corr.U, corr.w)
-        for a, b in zip(ys[:-1], ys[1:]):
-            d = b - a
-            L2 = float(d @ d)
-            if L2 == 0:
-                continue
-            u = min(max(float((y - a) @ d) / L2, 0.0), 1.0)
-            if np.linalg.norm(y - a - u * d) <= RETRACE_DISTANCE * np.sqrt(L2):
-                return True
-        return False
+        segments that end before it (scaled unknowns, ``_Path.retraces``). On 1 rank smooth-ms's
+        top-level sweep of the quick model stepped from 0.568 mm back to 0.470 mm at a corner
+        fold and traced 0.47 → 0.57 mm a second time (five points more than on 2 ranks)."""
+        n = len(self.sols)
+        return self.path.retraces(corr.U, corr.w, self.sc, n - 1 - RETRACE_SEGMENTS, n - 2)
 
     def _turned_back(self, corr: _Correction) -> bool:
         """True if the corrected point lies on a part of the branch traced more than
@@ -620,7 +609,7 @@ class _Branch:
         points (ds 1e-4), then went back down the branch it had come up, and retraced 140
         points to below the band before the sweep failed and was run again at the strict
         tolerances (29 of its 43 s; issue 16, session 20)."""
-        return self.path.retraces(corr.U, corr.w, self.sc, len(self.sols) - 1 - RETRACE_SEGMENTS)
+        return self.path.retraces(corr.U, corr.w, self.sc, 0, len(self.sols) - 1 - RETRACE_SEGMENTS)
 
     def _amplitude_step_ok(self, corr: _Correction) -> bool:
         """The arc length lives on the contact unknowns; the response DOF may resonate in a mode

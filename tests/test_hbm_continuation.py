@@ -522,9 +522,10 @@ def test_a_point_on_the_branch_already_traced_is_a_retrace():
     from hbm import continuation as cn
     # a branch along U from (U, w) = (0, 1) to (4, 1.4), then current at (5, 1.5)
     pts = [(float(u), 1.0 + 0.1 * u) for u in range(6)]
-    sols = [SimpleNamespace(contact=np.array([[u]]), omega=w) for u, w in pts]
-    br = SimpleNamespace(sols=sols, sc=cn._Scaling(1.0, 1.0, (1, 1)),
-                         hb=SimpleNamespace(from_contact=lambda c: np.asarray(c, float)))
+    path = cn._Path()
+    for u, w in pts:
+        path.append(np.array([[u]]), w)
+    br = SimpleNamespace(sols=pts, path=path, sc=cn._Scaling(1.0, 1.0, (1, 1)))
 
     def corr(u, w):
         return cn._Correction(True, np.array([[u]]), w, None, 1)
@@ -550,9 +551,7 @@ def test_a_point_on_the_branch_traced_long_before_is_a_turn_back():
     path = cn._Path()
     for u, w in pts:
         path.append(np.array([[u]]), w)
-    sols = [SimpleNamespace(contact=np.array([[u]]), omega=w) for u, w in pts]
-    br = SimpleNamespace(sols=sols, path=path, sc=cn._Scaling(1.0, 1.0, (1, 1)),
-                         hb=SimpleNamespace(from_contact=lambda c: np.asarray(c, float)))
+    br = SimpleNamespace(sols=pts, path=path, sc=cn._Scaling(1.0, 1.0, (1, 1)))
 
     def corr(u, w):
         return cn._Correction(True, np.array([[u]]), w, None, 1)
@@ -566,8 +565,8 @@ def test_a_point_on_the_branch_traced_long_before_is_a_turn_back():
     assert not back(corr(31.0, 2.25))                    # a fold's Z: that frequency, another U
     path.truncate(13)
     assert len(path.rows) == len(path.w) == 13 and len(path.du) == 12
-    assert not cn._Path.retraces(path, np.array([[12.5]]), 2.25, br.sc, 12)   # no segment 12 now
-    assert cn._Path.retraces(path, np.array([[11.5]]), 2.15, br.sc, 12)
+    assert not path.retraces(np.array([[12.5]]), 2.25, br.sc, 0, 13)   # no segment 12 now
+    assert path.retraces(np.array([[11.5]]), 2.15, br.sc, 0, 13)
 
 
 def test_a_corner_restart_with_a_small_turn_takes_no_lu(monkeypatch):
