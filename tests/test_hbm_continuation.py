@@ -513,28 +513,33 @@ def test_a_corner_restart_onto_a_far_point_is_refused(monkeypatch):
     assert np.isclose(frf.amplitude.max(), ref.amplitude.max(), rtol=1e-2)
 
 
-def test_a_point_on_the_branch_already_traced_is_a_retrace():
-    """``_Branch._retraces``: a corrected point on a segment of the branch before the current
-    point is a retrace (the step went back); a point ahead, and one where the branch turns back
-    in frequency but goes on in the response (a fold's Z), is not."""
+def _line_branch(n: int):
+    """A branch's stand-in for the retrace checks: n points along U from (U, w) = (0, 1) to
+    (n - 1, 1 + 0.1 (n - 1)), the current point last, unit scaling; and a corrected point
+    (U, w) -> _Correction."""
     from types import SimpleNamespace
 
     from hbm import continuation as cn
-    # a branch along U from (U, w) = (0, 1) to (4, 1.4), then current at (5, 1.5)
-    pts = [(float(u), 1.0 + 0.1 * u) for u in range(6)]
+    pts = [(float(u), 1.0 + 0.1 * u) for u in range(n)]
     path = cn._Path()
     for u, w in pts:
         path.append(np.array([[u]]), w)
     br = SimpleNamespace(sols=pts, path=path, sc=cn._Scaling(1.0, 1.0, (1, 1)))
+    return br, (lambda u, w: cn._Correction(True, np.array([[u]]), w, None, 1))
 
-    def corr(u, w):
-        return cn._Correction(True, np.array([[u]]), w, None, 1)
+
+def test_a_point_on_the_branch_already_traced_is_a_retrace():
+    """``_Branch._retraces``: a corrected point on a segment of the branch before the current
+    point is a retrace (the step went back); a point ahead, and one where the branch turns back
+    in frequency but goes on in the response (a fold's Z), is not."""
+    from hbm import continuation as cn
+    # a branch along U from (U, w) = (0, 1) to (4, 1.4), then current at (5, 1.5)
+    br, corr = _line_branch(6)
     retraces = lambda c: cn._Branch._retraces(br, c)     # noqa: E731
     assert retraces(corr(2.5, 1.25)) and retraces(corr(1.02, 1.1))
     assert not retraces(corr(6.0, 1.6))                  # ahead
     assert not retraces(corr(6.0, 1.45))                 # back in ω, on in U: a fold
     assert not retraces(corr(4.5, 1.45))                 # the current segment itself is not checked
-
 
 
 def test_a_point_on_the_branch_traced_long_before_is_a_turn_back():
@@ -543,18 +548,10 @@ def test_a_point_on_the_branch_traced_long_before_is_a_turn_back():
     crawl of many small steps at a corner hides it from ``_retraces``' window); a point ahead, a
     fold's Z (the same frequency, another response) and a step back onto the last segments
     (``_retraces``' case) are not. ``_Path.truncate`` keeps the points and segments in step."""
-    from types import SimpleNamespace
-
     from hbm import continuation as cn
     # a branch along U from (U, w) = (0, 1) to (30, 4), the current point last
-    pts = [(float(u), 1.0 + 0.1 * u) for u in range(31)]
-    path = cn._Path()
-    for u, w in pts:
-        path.append(np.array([[u]]), w)
-    br = SimpleNamespace(sols=pts, path=path, sc=cn._Scaling(1.0, 1.0, (1, 1)))
-
-    def corr(u, w):
-        return cn._Correction(True, np.array([[u]]), w, None, 1)
+    br, corr = _line_branch(31)
+    path = br.path
     back = lambda c: cn._Branch._turned_back(br, c)      # noqa: E731
     window = lambda c: cn._Branch._retraces(br, c)       # noqa: E731
     far = corr(12.5, 2.25)
