@@ -901,9 +901,10 @@ def _cycle_matrix(tab: _StepTables, rows, rec: _Record) -> np.ndarray:
         T0 = tab.kt[g] * (tab.ut[g, j - 1] - rec.wst[todo[e], j])
         r0 = np.abs(T0)
         z0 = T0 / r0
-        K = tab.det[g, j] / (tab.be[g, j].conj() * z0 + tab.al[g, j].conj()) ** 2
+        den = _cmul(tab.be[g, j].conj(), z0) + tab.al[g, j].conj()
+        K = tab.det[g, j] / _cmul(den, den)
         P[e, j] = tab.L[g, j] / (2.0 * r0) * K
-        Q[e, j] = -P[e, j] * z0 * z0
+        Q[e, j] = -_cmul(P[e, j], _cmul(z0, z0))
         rec.cP[todo], rec.cQ[todo] = _compose(P, Q)
         rec.cdone[todo] = True
     return _to_real(rec.cP, rec.cQ)
@@ -928,8 +929,18 @@ def _compose(P, Q):
             P = np.concatenate([P, np.ones_like(P[:, :1])], axis=1)
             Q = np.concatenate([Q, np.zeros_like(Q[:, :1])], axis=1)
         P1, Q1, P2, Q2 = P[:, 0::2], Q[:, 0::2], P[:, 1::2], Q[:, 1::2]
-        P, Q = P2 * P1 + Q2 * Q1.conj(), P2 * Q1 + Q2 * P1.conj()
+        P, Q = _cmul(P2, P1) + _cmul(Q2, Q1.conj()), _cmul(P2, Q1) + _cmul(Q2, P1.conj())
     return P[:, 0], Q[:, 0]
+
+
+def _cmul(a, b):
+    """a b for complex arrays in real arithmetic, each operation rounded on its own: numpy's
+    complex product contracts to a fused multiply-add on some of its paths and not on others,
+    chosen by where its operands lie in memory, so the same product differed in its last bit
+    between calls and the Newton-closed march (``_cycle_matrix``) between runs of one curve
+    (issue 16, session 20)."""
+    ar, ai, br, bi = a.real, a.imag, b.real, b.imag
+    return (ar * br - ai * bi) + 1j * (ar * bi + ai * br)
 
 
 def _advance(tab: _StepTables, rows, rec: _Record, w, pos, act):
