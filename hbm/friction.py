@@ -934,11 +934,11 @@ def _compose(P, Q):
 
 
 def _cmul(a, b):
-    """a b for complex arrays in real arithmetic, each operation rounded on its own: numpy's
-    complex product contracts to a fused multiply-add on some of its paths and not on others,
-    chosen by where its operands lie in memory, so the same product differed in its last bit
-    between calls and the Newton-closed march (``_cycle_matrix``) between runs of one curve
-    (issue 16, session 20)."""
+    """a b for complex arrays in real arithmetic, each operation rounded on its own. With numpy's
+    complex products the Newton-closed march (``_cycle_matrix``) gave different last bits for the
+    same inputs between calls, and a curve different paths between runs (issue 16, session 20);
+    numpy's complex loops may or may not fuse a multiply and an add, and what chose the path was
+    not pinned down (not the operands' alignment). Each real operation here is exactly rounded."""
     ar, ai, br, bi = a.real, a.imag, b.real, b.imag
     return (ar * br - ai * bi) + 1j * (ar * bi + ai * br)
 
