@@ -299,15 +299,15 @@ def test_a_top_with_kinks_is_searched_at_the_kink_tolerances(monkeypatch) -> Non
 
 def test_speed_tables_measure_the_frf_peak() -> None:
     """The harmonics/samples speed-against-error rows are the FRF peak (a local peak search from
-    the reference peak, which a short sweep through it finds, speed_error.PEAK_BAND), not a
+    the study curve's peak and its contact harmonics, speed_error.curve_reference), not a
     cold-start solve at the peak frequency (which landed on the lower branch of the resonator's
     fold): at the study's own H and n_t the row equals the full sweep's polished peak; each row
     equals a full sweep's peak at its own H and n_t; the last row is the reference (0 error)."""
     from fe_joint.study import speed_error as se
     rm, joint, level = _two_grounded_masses(), _joint(2e4), 5.0
-    cr, _ = _sweep(rm, joint, level)
-    t = se.hbm_knobs(rm, joint, level, SETTINGS, cr.peak_hz, harmonics=(1, 3), samples=(16, 32),
-                     h_fixed=1)
+    cr, contact = _sweep(rm, joint, level)
+    assert cr.peak_contact.shape == (1, 3, 3) and np.array_equal(cr.peak_contact, contact)
+    t = se.hbm_knobs(rm, joint, SETTINGS, cr, harmonics=(1, 3), samples=(16, 32), h_fixed=1)
     rows = t[se.SAMPLES_TABLE]
     same = rows[-1]                                   # H = 1, 32 samples: the sweep's settings
     assert (same["harmonics"], same["samples"]) == (1, 32)
@@ -338,10 +338,11 @@ def test_speed_row_without_a_reference_says_so() -> None:
 
 def test_element_count_rows_are_the_models_own_peaks() -> None:
     """The element-count table (speed_error.mesh_rows): each row is its model's own FRF peak, found
-    by a sweep centred by the model's stuck frequency; the last row (the case's mesh) is the
-    reference. Here the 'coarse' model is the same structure with a 4 % stiffer joint (its stuck
-    frequency and peak move): its row equals that joint's full-sweep peak, its stuck frequency
-    error is the stuck modes' own difference, and the reference row has zero errors."""
+    by the study's sweep with the band relative to the model's stuck frequency; the last row (the
+    case's mesh) is the study's curve itself. Here the 'coarse' model is the same structure with
+    a 4 % stiffer joint (its stuck frequency and peak move): its row equals that joint's
+    full-sweep peak, its stuck frequency error is the stuck modes' own difference, and the
+    reference row has zero errors."""
     from fe_joint.study.speed_error import mesh_rows
     rm = _two_grounded_masses()
     rm.n_pairs, rm.n_dofs, rm.preload_status = 1, 6, np.array([1])
@@ -349,8 +350,8 @@ def test_element_count_rows_are_the_models_own_peaks() -> None:
     case_joint, coarse_joint = _joint(2e4), _joint(2e4 * 1.04)
     ref, _ = _sweep(rm, case_joint, level)
     coarse, _ = _sweep(rm, coarse_joint, level)
-    rows = mesh_rows([(4.0, rm, 1.0, coarse_joint), (2.8, rm, 2.0, case_joint)], level, SETTINGS,
-                     ref.peak_hz)
+    rows = mesh_rows([(4.0, rm, 1.0, coarse_joint), (2.8, rm, 2.0, case_joint)], SETTINGS, ref)
+    assert rows[1]["HBM time [s]"] == ref.seconds and rows[1]["points"] == ref.n_points
     assert [r["lap mesh [mm]"] for r in rows] == [4.0, 2.8] and rows[0]["elements"] == 1
     for r, cr in zip(rows, (coarse, ref)):
         assert abs(r["peak [Hz]"] / cr.peak_hz - 1) <= 1e-7
@@ -374,9 +375,9 @@ def test_speed_rows_as_queue_jobs_give_the_sequential_tables(tmp_path) -> None:
     ref, _ = _sweep(rm, case_joint, level)
     models = [(4.0, rm, 1.0, coarse_joint), (2.8, rm, 2.0, case_joint)]
     knobs = se.knob_grid((1, 3), (16, 32), h_fixed=1)
-    seq = {**se.hbm_knobs(rm, case_joint, level, SETTINGS, ref.peak_hz, harmonics=(1, 3),
-                          samples=(16, 32), h_fixed=1),
-           se.MESH_TABLE: se.mesh_rows(models, level, SETTINGS, ref.peak_hz)}
+    seq = {**se.hbm_knobs(rm, case_joint, SETTINGS, ref, harmonics=(1, 3), samples=(16, 32),
+                          h_fixed=1),
+           se.MESH_TABLE: se.mesh_rows(models, SETTINGS, ref)}
     jobs = se.speed_jobs([], knobs, len(models), (1, 32))
     # the reference first (the harmonics and samples rows wait for it), then the coarser mesh's
     # row (it builds its FE model), then the costliest search
@@ -391,16 +392,15 @@ def test_speed_rows_as_queue_jobs_give_the_sequential_tables(tmp_path) -> None:
     assert [j.peak_of for j in jobs if j.table == "mesh"] == ["", se.REFERENCE]
     assert {j.name for j in jobs if j.needs_reference} == {"samples-0", "samples-1", "harmonics-0",
                                                            "harmonics-1"}
-    f_case = stuck_modes(rm.K, rm.M, rm.pair_dofs, case_joint).frequency
     reference = {}
 
     def run(job):          # as the speed stage's
         if job.peak_of:
             return se.own_fields(job, models)
         if job.table == "mesh":
-            return se.mesh_row(models[job.model], f_case, level, SETTINGS, ref.peak_hz)
+            return se.mesh_row(models[job.model], level, SETTINGS)
         if job.table == "reference":
-            return se.reference_row(rm, case_joint, level, SETTINGS, ref.peak_hz)
+            return se.curve_reference(ref)
         return se.hbm_row(rm, case_joint, level, SETTINGS, reference, job.harmonics, job.samples)
 
     stale = se.SpeedJob("samples", 0, harmonics=1, samples=16)

@@ -17,7 +17,8 @@ import numpy as np
 from petsc4py import PETSc
 
 from .condensation import BoundaryCondensation
-from .modal import free_modes, mumps_cholesky, solve_eigenproblem, to_hz
+from .block_lanczos import lowest_modes
+from .modal import free_modes, mumps_cholesky, rayleigh_ritz, solve_eigenproblem, to_hz
 from ..model.reduced_model import ReducedModel, check_damping_ratio, modal_damping_matrix
 
 
@@ -54,7 +55,13 @@ def fixed_interface_modes(cond: BoundaryCondensation, cutoff_hz: float,
                           max_modes: int = 2000) -> tuple[np.ndarray, list]:
     """Fixed-interface modes of (K_II, M_II) with frequency <= cutoff_hz.
 
-    The number of modes is counted first (:func:`count_modes_below`), then one SLEPc solve.
+    The number of modes is counted first (:func:`count_modes_below`), then block Lanczos on
+    K_II's factor, which the condensation keeps for the constraint modes
+    (:func:`~fe_joint.fe.block_lanczos.lowest_modes`). Its Ritz values are upper bounds of the
+    eigenvalues: when all ``n`` lie below the cut-off they are the ``n`` modes the count found.
+    Otherwise (a mode missed, the basis over its memory budget, no convergence) SLEPc's
+    Krylov–Schur solves the problem (:func:`~fe_joint.fe.modal.solve_eigenproblem`), with the
+    factor released first (one factor alive at a time).
 
     Returns:
         (frequencies Hz ascending, list of M_II-normalized interior Vecs).
@@ -67,6 +74,14 @@ def fixed_interface_modes(cond: BoundaryCondensation, cutoff_hz: float,
         raise ValueError(f"cutoff_hz = {cutoff_hz} keeps {n} fixed-interface modes (> {max_modes}); lower it")
     if n == 0:
         return np.zeros(0), []
+    found = lowest_modes(KII, MII, cond.factor, n)
+    if found is not None:
+        vals, vecs = rayleigh_ritz(KII, MII, found[1])
+        if to_hz(vals)[-1] <= cutoff_hz:
+            return to_hz(vals), vecs
+        for v in vecs:
+            v.destroy()
+    cond.release_factor()
     vals, vecs = solve_eigenproblem(KII, MII, n, sigma=0.0)
     f = to_hz(vals)
     keep = f <= cutoff_hz
@@ -263,10 +278,10 @@ def build_reduced_model_from_fe(fe, material, preload_force: float, damping_rati
     timings["assembly_s"] = time.perf_counter() - t
     cond = BoundaryCondensation(problem.K, problem.M, problem.layout.dofs)
     t = time.perf_counter()
-    fm, modes = fixed_interface_modes(cond, cutoff_hz)  # before K_II is factorized: one factor alive
+    fm, modes = fixed_interface_modes(cond, cutoff_hz)  # factorizes K_II (its block Lanczos)
     timings["fixed_interface_modes_s"] = time.perf_counter() - t
     t = time.perf_counter()
-    cond.ksp  # factorize K_II
+    cond.ksp  # factorize K_II (done unless SLEPc had to solve the modes)
     timings["factorization_s"] = time.perf_counter() - t
     t = time.perf_counter()
     cond.condense(modes, chunk)

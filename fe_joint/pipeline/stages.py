@@ -354,7 +354,6 @@ def _speed_tables(ctx: StageContext) -> tuple[dict, dict]:
         su = ms.interface_setup(rm, c.geometry, c.material, c.roughness)
         models = [None] * len(se.lap_mesh_sizes(c.geometry.lap_mesh_size)) + [
             (c.geometry.lap_mesh_size, rm, fe_s, joint_baseline(su, c.contact.k_ref))]
-    f_case = (stuck_modes(rm.K, rm.M, rm.pair_dofs, models[-1][3]).frequency if models else 0.0)
     jobs = se.speed_jobs(grids, knobs, len(models), (settings.harmonics, settings.samples))
     ref: dict = {}     # the reference peak, read from disk by the first row that needs it
 
@@ -367,9 +366,9 @@ def _speed_tables(ctx: StageContext) -> tuple[dict, dict]:
             return se.bem_row(rm, c, job.grid)
         if job.table == "mesh":     # a coarser mesh: its FE model built by this rank alone
             model = _coarser_model(c, se.lap_mesh_sizes(c.geometry.lap_mesh_size)[job.model])
-            return {**se.mesh_row(model, f_case, cr.level, settings, cr.peak_hz), "FE ranks": 1}
+            return {**se.mesh_row(model, cr.level, settings), "FE ranks": 1}
         if job.table == "reference":
-            return se.reference_row(rm, models[-1][3], cr.level, settings, cr.peak_hz)
+            return se.curve_reference(cr)
         if not ref:        # written before any row that needs it is dealt (after=)
             ref.update(se.read_reference(folder, se.read_rows(folder, jobs, stage_key)))
         return se.hbm_row(rm, models[-1][3], cr.level, settings, ref, job.harmonics, job.samples)

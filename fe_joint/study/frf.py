@@ -9,7 +9,7 @@ tangential force amplitude and loops — as plain arrays (:class:`CurveResult`, 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from types import SimpleNamespace
 from pathlib import Path
 
@@ -124,6 +124,10 @@ class CurveResult:
     # at THRASH_TOLERANCES, Hz (NaN: no hand-over); NaN for a local branch (``peak_near``)
     sweep_tol: float = float("nan")
     handover_hz: float = float("nan")
+    # the contact harmonics at the peak, (ne, 3, 2H + 1), zeros for inactive pairs: the warm
+    # start of a peak search on a slightly changed joint or other H (the speed stage's rows from
+    # the study's curve); (0, 3, 0) in files written before it
+    peak_contact: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 0)))
 
     @property
     def key(self) -> CurveKey:
@@ -330,7 +334,7 @@ def peak_near(rm, joint: JointModel, level: float, f_guess: float, guess: np.nda
     order = np.argsort(omega)   # a short branch near the peak: shown by frequency
     cr = _curve_result(hb, rm, joint, level, act, peak_sol, omega[order], amp[order],
                        np.ones(len(omega), bool), its, t0)
-    return cr, _full_contact(joint, act, peak_sol)
+    return cr, cr.peak_contact
 
 
 def _scan_top(hb, force: np.ndarray, dof: int, res, k: int, n: int | None = None):
@@ -450,7 +454,8 @@ def _curve_result(hb, rm, joint, level, act, peak_sol, omega, amplitude, stable,
         loop_u=(w[:, None] * elem_u).sum(axis=0), loop_T=elem_T.sum(axis=0),
         elem_u=elem_u, elem_T=elem_T, seconds=time.perf_counter() - t0,
         newton_iterations=int(iterations), n_points=len(omega),
-        n_active=len(act), n_nonlinear=int(np.sum(er.status > 0)))
+        n_active=len(act), n_nonlinear=int(np.sum(er.status > 0)),
+        peak_contact=_full_contact(joint, act, peak_sol))
 
 
 def _interpolated_start(w: float, known: dict, fallback):

@@ -47,8 +47,9 @@ from .contact import InterfaceSetup
 from .fixed_point import run_v3
 from .frf import CurveResult, SweepSettings, frf
 
-#: bump when a job's result changes for the same inputs (its key changes with it)
-JOB_VERSION = "1"
+#: bump when a job's result changes for the same inputs (its key changes with it); 2: a curve
+#: keeps its contact harmonics at the peak (``CurveResult.peak_contact``, the speed stage's warm start)
+JOB_VERSION = "2"
 #: job kinds that need a finished v3 fixed point (dealt once it is written: DynamicsQueue.after)
 FOLLOW_UP = ("v3-level", "v2-pass0")
 

@@ -3,13 +3,14 @@
 Each table varies one knob with the others at the case's values and compares against the finest
 setting computed in the same run: the global BEM grid (real contact area), the number of
 harmonics and the AFT samples (the baseline's FRF peak at the middle level: frequency and
-first-harmonic amplitude, each found by a local peak search warm-started from the peak at the
-case's own H and n_t, which a short sweep through it finds, :data:`PEAK_BAND`; a cold-start solve
-at the peak frequency landed on the lower branch of the fold, 158.5 vs 492 µm on the default
-case, and measured the wrong solution's convergence), and the element count: the
-lap mesh size sets how many friction elements the interface has (:func:`mesh_rows`, on reduced
-models the ``speed`` stage builds at coarser lap meshes; the FE side of mesh convergence is in
-``scripts/bench_fe.py`` and ``scripts/bench_geometry.py``).
+first-harmonic amplitude, each found by a local peak search warm-started from the study's own
+curve there, its peak and contact harmonics, :func:`curve_reference`; a cold-start solve at the
+peak frequency landed on the lower branch of the fold, 158.5 vs 492 µm on the default case, and
+measured the wrong solution's convergence), and the element count: the lap mesh size sets how
+many friction elements the interface has (:func:`mesh_rows`, on reduced models the ``speed``
+stage builds at coarser lap meshes, each swept as the study sweeps its curves; the case's own
+mesh's row is the study's curve; the FE side of mesh convergence is in ``scripts/bench_fe.py``
+and ``scripts/bench_geometry.py``).
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from . import contact as ms
-from .frf import SweepSettings, frf, frf_with_peak, peak_near
+from .frf import SweepSettings, frf, peak_near
 
 
 def bem_row(rm, case, n: int) -> dict:
@@ -49,37 +50,32 @@ def bem_grid(rm, case, grids=(64, 128, 256, 512)) -> list[dict]:
     return bem_errors([bem_row(rm, case, n) for n in grids])
 
 
-#: the band of the speed stage's sweeps (the reference peak and the element-count rows), as
-#: fractions of the study curve's peak: the sweep starts below the fold of a softening peak (where
-#: the response is single-valued) and passes through the peak, so it measures the FRF peak itself,
-#: not a cold start's lower branch
-PEAK_BAND = (0.99, 1.005)
 #: where the harmonics and samples rows' local peak searches start, relative to the reference
 #: peak: just above it, where the branch is single-valued even when it folds below the peak (on
 #: the default case H = 1 moves the peak by +0.2 %, the samples by less than 0.02 %)
 LOCAL_START = 2e-3
 
 
-def reference_row(rm, joint, level: float, settings: SweepSettings, f_peak_hz: float) -> dict:
-    """The reference of the harmonics and samples rows: the FRF peak at the case's own H and n_t,
-    by a sweep through :data:`PEAK_BAND` × ``f_peak_hz``.
+def curve_reference(cr) -> dict:
+    """The reference of the harmonics and samples rows, and the case mesh's row of the
+    element-count table: the study's own FRF at the case's H and n_t (a ``CurveResult``).
+
+    Its sweep is the one the other rows' are compared with, so it is not run again: the speed
+    stage's own sweep of that curve (through ±1 % of its peak) took 18 s of the default study's
+    84 s stage, as long as the study's curve over its whole band.
 
     Returns:
-        the row's fields (H, samples, peak [Hz], amplitude [µm], time [s], points; "note" when the
-        sweep fails) and "guess", the contact harmonics at the peak, (ne, 3, 2H + 1) over all
-        pairs (absent when the sweep fails): the rows' warm start (:func:`hbm_row`).
+        the row's fields (H, samples, peak [Hz], amplitude [µm], time [s], points) and "guess",
+        the contact harmonics at the peak, (ne, 3, 2H + 1) over all pairs: the rows' warm start
+        (:func:`hbm_row`); None (and a "note") for a curve saved without them.
     """
-    from hbm import ConvergenceError
-    st = dataclasses.replace(settings, band=PEAK_BAND)
-    out = {"harmonics": settings.harmonics, "samples": settings.samples}
-    t0 = time.perf_counter()
-    try:
-        cr, guess = frf_with_peak(rm, joint, level, f_peak_hz, st)
-    except ConvergenceError as e:
-        return {**out, "peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
-                "time [s]": time.perf_counter() - t0, "points": 0, "note": f"not found ({e})"}
-    return {**out, "peak [Hz]": cr.peak_hz, "amplitude [µm]": 1e3 * cr.peak_amplitude,
-            "time [s]": time.perf_counter() - t0, "points": cr.n_points, "guess": guess}
+    H = (cr.peak_contact.shape[2] - 1) // 2
+    out = {"harmonics": H, "samples": int(cr.elem_u.shape[1]), "peak [Hz]": cr.peak_hz,
+           "amplitude [µm]": 1e3 * cr.peak_amplitude, "time [s]": cr.seconds,
+           "points": cr.n_points, "guess": None}
+    if cr.peak_contact.size == 0:
+        return {**out, "note": "not found (the curve has no contact harmonics at its peak)"}
+    return {**out, "guess": np.asarray(cr.peak_contact, float)}
 
 
 def with_harmonics(contact: np.ndarray, H: int) -> np.ndarray:
@@ -94,7 +90,7 @@ def hbm_row(rm, joint, level: float, settings: SweepSettings, reference: dict, H
             nt: int) -> dict:
     """The FRF peak (frequency, amplitude) with H harmonics and nt AFT samples, and the time of
     its search: a local peak search (:func:`~fe_joint.study.frf.peak_near`) warm-started from
-    the reference peak (:func:`reference_row`, the case's H and n_t).
+    the reference peak (:func:`curve_reference`: the study's curve, the case's H and n_t).
 
     A sweep per row through the peak cost 20-490 s a row on the default model (the n_t = 32
     row's sweep failed with the fast tolerances after 3800 solves before the strict one found
@@ -105,7 +101,7 @@ def hbm_row(rm, joint, level: float, settings: SweepSettings, reference: dict, H
     Args:
         rm, joint, level: the model, the configuration and the level (N).
         settings: the study's sweep settings (H and n_t replaced).
-        reference: :func:`reference_row`'s fields (its "peak [Hz]" and "guess").
+        reference: :func:`curve_reference`'s fields (its "peak [Hz]" and "guess").
         H, nt: the row's harmonics and samples.
     Returns:
         H, samples, peak [Hz], amplitude [µm], time [s], points (of the local branch), and a
@@ -135,8 +131,8 @@ HARMONICS_TABLE = ("harmonics (baseline, middle level, FRF peak by a local searc
                    "case settings' peak)")
 SAMPLES_TABLE = ("AFT samples (baseline, middle level, FRF peak by a local search from the case "
                  "settings' peak)")
-MESH_TABLE = ("interface elements (lap mesh size; baseline, middle level, FRF peak by a sweep "
-              "through it)")
+MESH_TABLE = ("interface elements (lap mesh size; baseline, middle level, FRF peak by the study's "
+              "sweep)")
 
 
 def knob_grid(harmonics=(1, 3, 5, 7), samples=(16, 32, 64, 128, 256),
@@ -147,25 +143,25 @@ def knob_grid(harmonics=(1, 3, 5, 7), samples=(16, 32, 64, 128, 256),
     return [(H, nt_h) for H in harmonics], [(h_fixed, nt) for nt in samples]
 
 
-def hbm_knobs(rm, joint, level: float, settings: SweepSettings, f_peak_hz: float,
-              harmonics=(1, 3, 5, 7), samples=(16, 32, 64, 128, 256), h_fixed: int = 3) -> dict:
+def hbm_knobs(rm, joint, settings: SweepSettings, cr, harmonics=(1, 3, 5, 7),
+              samples=(16, 32, 64, 128, 256), h_fixed: int = 3) -> dict:
     """The FRF peak (frequency, amplitude) and its search's time vs H and vs AFT samples.
 
     Args:
-        rm: ReducedModel; joint: the configuration; level: N.
-        settings: the study's sweep settings (μ, max_points; its H and samples are the
-            reference's, :func:`reference_row`).
-        f_peak_hz: the study curve's peak at that level, Hz (centre of :data:`PEAK_BAND`).
+        rm: ReducedModel; joint: the configuration.
+        settings: the study's sweep settings (μ, max_points; its H and samples are the curve's).
+        cr: the study's curve of ``joint`` at one level (``CurveResult``, the reference,
+            :func:`curve_reference`).
         harmonics, samples: the values tried; h_fixed: H of the samples table.
     Returns:
         {table title: rows}, each row with H, samples, peak [Hz], amplitude [µm], time [s],
         points, and its errors against the finest row.
     """
-    ref = reference_row(rm, joint, level, settings, f_peak_hz)
+    ref = curve_reference(cr)
     hk, sk = knob_grid(harmonics, samples, h_fixed)
-    hr = _errors([hbm_row(rm, joint, level, settings, ref, H, nt) for H, nt in hk],
+    hr = _errors([hbm_row(rm, joint, cr.level, settings, ref, H, nt) for H, nt in hk],
                  f"H={harmonics[-1]}")
-    sr = _errors([hbm_row(rm, joint, level, settings, ref, H, nt) for H, nt in sk], "finest")
+    sr = _errors([hbm_row(rm, joint, cr.level, settings, ref, H, nt) for H, nt in sk], "finest")
     return {HARMONICS_TABLE: hr, SAMPLES_TABLE: sr}
 
 
@@ -179,15 +175,15 @@ def lap_mesh_sizes(lap_mesh_size: float) -> list[float]:
     return [round(f * lap_mesh_size, 1) for f in LAP_MESH_FACTORS]
 
 
-def mesh_row(model: tuple, f_stuck_case: float, level: float, settings: SweepSettings,
-             f_peak_hz: float) -> dict:
-    """One row of the element-count table (errors are added by :func:`mesh_errors`).
+def mesh_row(model: tuple, level: float, settings: SweepSettings) -> dict:
+    """One row of the element-count table (errors are added by :func:`mesh_errors`): the
+    model's FRF swept as the study sweeps its curves (the band relative to the model's own stuck
+    frequency), so that the rows compare like with like and the case mesh's row is the study's
+    curve (:func:`curve_fields`).
 
     Args:
         model: (lap mesh size mm, ReducedModel, FE seconds, baseline JointModel on it).
-        f_stuck_case: the stuck frequency of the case's own mesh, Hz (centres the sweep).
-        level: N; settings: the study's sweep settings (band replaced); f_peak_hz: the study's
-            peak at that level, Hz, scaled by this model's stuck frequency over the case's.
+        level: N; settings: the study's sweep settings.
     Returns:
         lap mesh size, elements, closed pairs, reduced DOFs, stuck and peak frequencies, peak
         amplitude, FE and HBM times, points.
@@ -195,17 +191,21 @@ def mesh_row(model: tuple, f_stuck_case: float, level: float, settings: SweepSet
     from hbm import ConvergenceError
     _, rm, _, joint = model
     out = mesh_fields(model)
-    f_st = out["stuck [Hz]"]
     t0 = time.perf_counter()
     try:
-        cr = frf(rm, joint, level, f_peak_hz * f_st / f_stuck_case,
-                 dataclasses.replace(settings, band=PEAK_BAND))
-        out.update({"peak [Hz]": cr.peak_hz, "amplitude [µm]": 1e3 * cr.peak_amplitude,
-                    "HBM time [s]": time.perf_counter() - t0, "points": cr.n_points})
+        cr = frf(rm, joint, level, out["stuck [Hz]"], settings)
+        out.update(curve_fields(cr))
     except ConvergenceError as e:
         out.update({"peak [Hz]": float("nan"), "amplitude [µm]": float("nan"),
                     "HBM time [s]": time.perf_counter() - t0, "points": 0, "note": f"not found ({e})"})
     return out
+
+
+def curve_fields(cr) -> dict:
+    """An element-count row's sweep fields from a curve: peak [Hz], amplitude [µm], HBM time [s],
+    points."""
+    return {"peak [Hz]": cr.peak_hz, "amplitude [µm]": 1e3 * cr.peak_amplitude,
+            "HBM time [s]": cr.seconds, "points": cr.n_points}
 
 
 def mesh_fields(model: tuple) -> dict:
@@ -230,23 +230,21 @@ def mesh_errors(rows: list[dict]) -> list[dict]:
     return _errors(rows, "case mesh")
 
 
-def mesh_rows(models: list, level: float, settings: SweepSettings, f_peak_hz: float) -> list[dict]:
+def mesh_rows(models: list, settings: SweepSettings, cr) -> list[dict]:
     """The baseline's stuck frequency and FRF peak at one level against the interface element
-    count (:func:`mesh_row` for each model).
+    count (:func:`mesh_row` for each coarser model).
 
     Args:
         models: [(lap mesh size mm, ReducedModel, FE seconds, baseline JointModel on it)], the
             case's own mesh last (the reference row).
-        level: N; settings: the study's sweep settings (H, samples, μ; band replaced).
-        f_peak_hz: the study's peak at that level (its mesh), Hz; each model's sweep is centred
-            on it scaled by the model's stuck frequency against the study's.
+        settings: the study's sweep settings (H, samples, μ, band).
+        cr: the study's curve of the case's model at the level (``CurveResult``): the last row's
+            sweep.
     Returns:
         rows of :func:`mesh_row`, with the errors against the last.
     """
-    from ..model.joint import stuck_modes
-    _, rm, _, joint = models[-1]
-    f_case = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency
-    return mesh_errors([mesh_row(m, f_case, level, settings, f_peak_hz) for m in models])
+    rows = [mesh_row(m, cr.level, settings) for m in models[:-1]]
+    return mesh_errors(rows + [{**mesh_fields(models[-1]), **curve_fields(cr)}])
 
 
 def _errors(rows: list[dict], ref_name: str) -> list[dict]:
@@ -264,8 +262,9 @@ class SpeedJob:
     """One row of a speed-against-error table, a job of the MPI queue (``study.queue``).
 
     Attributes:
-        table: "bem", "harmonics", "samples", "mesh", or "reference" (the peak at the case's H
-            and n_t that the harmonics and samples rows start from; not a table of its own).
+        table: "bem", "harmonics", "samples", "mesh", or "reference" (the study's curve at the
+            case's H and n_t, :func:`curve_reference`, that the harmonics and samples rows start
+            from; not a table of its own).
         index: the row's place in its table.
         grid: BEM grid n (table "bem").
         harmonics, samples: H and n_t (tables "harmonics", "samples" and "reference").
@@ -273,8 +272,8 @@ class SpeedJob:
         builds_model: the row builds its FE model first (a coarser mesh's row, table "mesh").
         peak_of: name of the job whose peak this row's is (the same computation: the harmonics
             row at the samples table's H, and the case mesh's row, whose sweep is the
-            reference's); such a job computes only its own fields (:func:`own_fields`), "" for
-            a row with its own search.
+            reference's: the study's curve); such a job computes only its own fields
+            (:func:`own_fields`), "" for a row with its own search.
     """
     table: str
     index: int
@@ -299,8 +298,9 @@ class SpeedJob:
 REFERENCE = "reference-0"
 #: bump when how a row is computed changes: rows on disk of another version are computed again
 #: (2: the harmonics and samples rows are local searches from the reference peak, not sweeps;
-#: 3: a coarser mesh's row builds its FE model on its own rank, its FE time is that serial build)
-ROWS_VERSION = 3
+#: 3: a coarser mesh's row builds its FE model on its own rank, its FE time is that serial build;
+#: 4: the reference is the study's curve, and the coarser meshes' rows sweep the study's band)
+ROWS_VERSION = 4
 
 
 def speed_jobs(grids, knobs: tuple[list, list] | None, n_models: int,
@@ -326,14 +326,15 @@ def speed_jobs(grids, knobs: tuple[list, list] | None, n_models: int,
         same = {(j.harmonics, j.samples): j.name for j in jobs if j.table == "samples"}
         jobs += [SpeedJob("harmonics", i, harmonics=h, samples=n, peak_of=same.get((h, n), ""))
                  for i, (h, n) in enumerate(knobs[0])]
-    # the case mesh's row is the reference's sweep (same model, H, n_t and band)
+    # the case mesh's row is the reference's sweep (the study's curve: same model, H, n_t, band)
     jobs += [SpeedJob("mesh", i, model=i,
                       peak_of=REFERENCE if knobs is not None and i == n_models - 1 else "",
                       builds_model=i < n_models - 1)
              for i in range(n_models)]
 
-    # the reference first (on the path of every harmonics and samples row); then the coarser
-    # meshes' rows, the finer first (an FE build, 20-45 s, and a sweep); a search's cost grows
+    # the reference first (read from the study's curve; every harmonics and samples row waits
+    # for it); then the coarser meshes' rows, the finer first (an FE build, 20-45 s, and a
+    # sweep); a search's cost grows
     # like (2H + 1)·n_t (the march); the BEM rows (seconds) and the rows without a search last
     def cost(j: SpeedJob) -> float:
         if j.table == "reference":
