@@ -324,6 +324,24 @@ def test_speed_tables_measure_the_frf_peak() -> None:
     assert abs(hr[1]["peak [Hz]"] / same["peak [Hz]"] - 1) > 1e-6       # H matters here
 
 
+def test_reference_of_a_curve_saved_without_its_peak_contact_says_so() -> None:
+    """A curve written before CurveResult.peak_contact (its default, (0, 3, 0)) gives a
+    reference without a warm start and with a note; one with it gives the curve's own fields."""
+    from dataclasses import replace as dc_replace
+
+    from fe_joint.study import speed_error as se
+    rm, joint, level = _two_grounded_masses(), _joint(2e4), 5.0
+    cr, contact = _sweep(rm, joint, level)
+    ref = se.curve_reference(cr)
+    assert ref["harmonics"] == SETTINGS.harmonics and ref["samples"] == SETTINGS.samples
+    assert np.array_equal(ref["guess"], contact) and ref["points"] == cr.n_points
+    assert ref["peak [Hz]"] == cr.peak_hz and ref["amplitude [µm]"] == 1e3 * cr.peak_amplitude
+    old = se.curve_reference(dc_replace(cr, peak_contact=np.zeros((0, 3, 0))))
+    assert old["guess"] is None and "no contact harmonics" in old["note"]
+    row = se.hbm_row(rm, joint, level, SETTINGS, old, 1, 64)
+    assert row["points"] == 0 and np.isnan(row["peak [Hz]"]) and "no reference" in row["note"]
+
+
 def test_speed_row_without_a_reference_says_so() -> None:
     """A row whose reference sweep failed is 'not found', with no search (and no sweep)."""
     from fe_joint.study import speed_error as se

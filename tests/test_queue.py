@@ -163,3 +163,28 @@ def test_map_ranks_deals_items_and_gathers_them_in_order() -> None:
         map_ranks(diverge, items, comm)
     if comm.size > 1:
         assert e.value.code == EXIT_CONVERGENCE
+
+
+def test_dynamics_dealing_order_readies_the_layer_backbone_early() -> None:
+    """The dynamics queue's order (jobs.dealing_order): v3 fixed points, their follow-ups, the
+    top-level curves, the layer joints' backbones, then the lower curves with the layer joints'
+    parents' first (so the long stiff-layer backbone is ready as soon as the top-level curves are
+    done), the small-excitation check, the backbones; every job once."""
+    from fe_joint.study.jobs import Job, dealing_order
+    from fe_joint.study.stiffness_definitions import AltJob
+    curves = [Job("curve", c, lv) for lv in (0, 1, 2) for c in ("baseline", "smooth-ms", "v1")]
+    jobs = ([Job("v3", "v3", 1, rq) for rq in (1.0, 10.0)] + curves
+            + [Job("curve", "baseline", None), Job("v3-level", "v3", 2, 10.0),
+               Job("v2-pass0", "v2", 1, 10.0)])
+    alts = [AltJob("smooth-ms-layer", None, "smooth-ms")]
+    bbs = [Job("backbone", "baseline", None), Job("backbone", "smooth-ms", None)]
+    order = dealing_order(jobs, alts, 3, bbs)
+    names = [j.name for j in order]
+    assert sorted(names) == sorted([j.name for j in jobs + bbs] + ["smooth-ms-layer"])
+    assert names[:4] == ["v3-rq1", "v3-rq10", "v3-rq10@L2", "v2@L1"]
+    assert names[4:7] == ["baseline@L2", "smooth-ms@L2", "v1@L2"]
+    assert names[7] == "smooth-ms-layer"
+    # the parent's lower curves first (top level down), then the others, then the check
+    assert names[8:10] == ["smooth-ms@L1", "smooth-ms@L0"]
+    assert names[10:14] == ["baseline@L1", "v1@L1", "baseline@L0", "v1@L0"]
+    assert names[14] == "check-linear@tiny" and names[15:] == [j.name for j in bbs]

@@ -208,19 +208,11 @@ def stage_dynamics(ctx: StageContext) -> dict:
     # written: the follow-up jobs after their v3 fixed point, a backbone after its joint's
     # forced curves (its cache key needs their peaks: keyed, or skipped when cached, just before
     # it is dealt), the layer joints' backbones (issue 13) after their parent's curves; longest
-    # first among the ready ones
+    # first among the ready ones (``jobs.dealing_order``)
     bb_jobs = study.backbone_jobs(c)
     alts = stiff_defs.layer_joints(inp, stiff_defs.bulk_stiffness(inp.setup))
-    run_now = [j for j in every if j.name in names]
-    # the order among ready jobs: the v3 fixed points, their follow-ups (the v3 joint's top-level
-    # curve is long), the top-level curves, the layer joints' backbones (the stiff one is long),
-    # the other curves from the top level down, the small-excitation check, the backbones
-    by_level = sorted((j for j in run_now if j.kind == "curve"),
-                      key=lambda j: -1 if j.level_index is None else j.level_index, reverse=True)
-    top = [j for j in by_level if j.level_index == len(levels) - 1]
-    queue = ([j for j in run_now if j.kind == "v3"]
-             + [j for j in run_now if j.kind in study.FOLLOW_UP] + top + list(alts)
-             + [j for j in by_level if j not in top] + bb_jobs)
+    queue = study.dealing_order([j for j in every if j.name in names], list(alts), len(levels),
+                                bb_jobs)
     bar = None
     if ctx.rank == 0 and ctx.progress and queue:
         from tqdm import tqdm

@@ -360,6 +360,32 @@ def backbone_jobs(case) -> list[Job]:
     return out
 
 
+def dealing_order(jobs: list[Job], alts: list, n_levels: int, backbones: list[Job]) -> list:
+    """The dynamics queue's jobs in the order it deals the ready ones: the v3 fixed points, their
+    follow-ups (the v3 joint's top-level curve is long), the top-level curves, the layer joints'
+    backbones (the stiff one is long), the other curves from the top level down with the layer
+    joints' parents' first, the small-excitation check, the backbones.
+
+    A layer joint's backbone is ready once its parent's curves at every level are written, and
+    it is the longest job after the top-level curves (65-100 s on the default model): with its
+    parent's lower curves first it starts as soon as the top-level curves leave a rank free,
+    and the short jobs fill the queue's end. Dealt after all middle-level curves, it started at
+    239 s of a 316 s queue (study 21a) and once ended last, one rank idle for 20 s (21b).
+
+    Args:
+        jobs: the jobs to run (curves, v3 and follow-ups); alts: the layer joints' ``AltJob``s
+            (``parent``: the configuration whose curves they need); n_levels: the study's levels;
+            backbones: :func:`backbone_jobs`.
+    """
+    curves = sorted((j for j in jobs if j.kind == "curve"),
+                    key=lambda j: -1 if j.level_index is None else j.level_index, reverse=True)
+    top = [j for j in curves if j.level_index == n_levels - 1]
+    parents = {a.parent for a in alts}
+    rest = sorted((j for j in curves if j not in top), key=lambda j: j.config not in parents)
+    return ([j for j in jobs if j.kind == "v3"] + [j for j in jobs if j.kind in FOLLOW_UP]
+            + top + list(alts) + rest + list(backbones))
+
+
 def backbone_plan(inp: StudyInputs, folder: Path, job: Job):
     """The joint, its stuck frequency (Hz) and the top-level peak amplitude (mm) a backbone job
     needs, from the finished FRF and v3 jobs in ``folder``.

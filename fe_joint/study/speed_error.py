@@ -69,13 +69,13 @@ def curve_reference(cr) -> dict:
         the contact harmonics at the peak, (ne, 3, 2H + 1) over all pairs: the rows' warm start
         (:func:`hbm_row`); None (and a "note") for a curve saved without them.
     """
-    H = (cr.peak_contact.shape[2] - 1) // 2
-    out = {"harmonics": H, "samples": int(cr.elem_u.shape[1]), "peak [Hz]": cr.peak_hz,
+    out = {"samples": int(cr.elem_u.shape[1]), "peak [Hz]": cr.peak_hz,
            "amplitude [µm]": 1e3 * cr.peak_amplitude, "time [s]": cr.seconds,
            "points": cr.n_points, "guess": None}
     if cr.peak_contact.size == 0:
         return {**out, "note": "not found (the curve has no contact harmonics at its peak)"}
-    return {**out, "guess": np.asarray(cr.peak_contact, float)}
+    return {**out, "harmonics": (cr.peak_contact.shape[2] - 1) // 2,
+            "guess": np.asarray(cr.peak_contact, float)}
 
 
 def with_harmonics(contact: np.ndarray, H: int) -> np.ndarray:
