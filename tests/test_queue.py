@@ -167,9 +167,10 @@ def test_map_ranks_deals_items_and_gathers_them_in_order() -> None:
 
 def test_dynamics_dealing_order_readies_the_layer_backbone_early() -> None:
     """The dynamics queue's order (jobs.dealing_order): v3 fixed points, their follow-ups, the
-    top-level curves, the layer joints' backbones, then the lower curves with the layer joints'
-    parents' first (so the long stiff-layer backbone is ready as soon as the top-level curves are
-    done), the small-excitation check, the backbones; every job once."""
+    layer joints' parents' curves (lower levels first), the layer joints' backbones, the other
+    top-level curves, the other lower curves, the small-excitation check, the backbones; every
+    job once. The queue deals the first ready job in this order, so the long stiff-layer
+    backbone starts as soon as its parent's top-level curve is written."""
     from fe_joint.study.jobs import Job, dealing_order
     from fe_joint.study.stiffness_definitions import AltJob
     curves = [Job("curve", c, lv) for lv in (0, 1, 2) for c in ("baseline", "smooth-ms", "v1")]
@@ -178,13 +179,16 @@ def test_dynamics_dealing_order_readies_the_layer_backbone_early() -> None:
                Job("v2-pass0", "v2", 1, 10.0)])
     alts = [AltJob("smooth-ms-layer", None, "smooth-ms")]
     bbs = [Job("backbone", "baseline", None), Job("backbone", "smooth-ms", None)]
-    order = dealing_order(jobs, alts, 3, bbs)
-    names = [j.name for j in order]
+    names = [j.name for j in dealing_order(jobs, alts, 3, bbs)]
     assert sorted(names) == sorted([j.name for j in jobs + bbs] + ["smooth-ms-layer"])
     assert names[:4] == ["v3-rq1", "v3-rq10", "v3-rq10@L2", "v2@L1"]
-    assert names[4:7] == ["baseline@L2", "smooth-ms@L2", "v1@L2"]
+    assert names[4:7] == ["smooth-ms@L1", "smooth-ms@L0", "smooth-ms@L2"]
     assert names[7] == "smooth-ms-layer"
-    # the parent's lower curves first (top level down), then the others, then the check
-    assert names[8:10] == ["smooth-ms@L1", "smooth-ms@L0"]
+    assert names[8:10] == ["baseline@L2", "v1@L2"]
     assert names[10:14] == ["baseline@L1", "v1@L1", "baseline@L0", "v1@L0"]
     assert names[14] == "check-linear@tiny" and names[15:] == [j.name for j in bbs]
+    # without layer joints: the top-level curves first, then down the levels
+    plain = [j.name for j in dealing_order(jobs, [], 3, bbs)]
+    assert plain[4:7] == ["baseline@L2", "smooth-ms@L2", "v1@L2"]
+    assert plain[7:13] == ["baseline@L1", "smooth-ms@L1", "v1@L1", "baseline@L0", "smooth-ms@L0",
+                           "v1@L0"]

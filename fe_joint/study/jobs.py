@@ -362,15 +362,17 @@ def backbone_jobs(case) -> list[Job]:
 
 def dealing_order(jobs: list[Job], alts: list, n_levels: int, backbones: list[Job]) -> list:
     """The dynamics queue's jobs in the order it deals the ready ones: the v3 fixed points, their
-    follow-ups (the v3 joint's top-level curve is long), the top-level curves, the layer joints'
-    backbones (the stiff one is long), the other curves from the top level down with the layer
-    joints' parents' first, the small-excitation check, the backbones.
+    follow-ups (the v3 joint's top-level curve is long), the curves of the layer joints'
+    parents (their lower levels first: short), the layer joints' backbones, the other top-level
+    curves, the other curves from the top level down, the small-excitation check, the backbones.
 
     A layer joint's backbone is ready once its parent's curves at every level are written, and
-    it is the longest job after the top-level curves (65-100 s on the default model): with its
-    parent's lower curves first it starts as soon as the top-level curves leave a rank free,
-    and the short jobs fill the queue's end. Dealt after all middle-level curves, it started at
-    239 s of a 316 s queue (study 21a) and once ended last, one rank idle for 20 s (21b).
+    the stiff one is the longest job after the top-level curves (65-100 s on the default model).
+    Dealt after every top-level curve and their parent's lower curves, it started at 234-239 s
+    of 316-341 s queues (studies 21a-c, session 21) and once ended last, one rank idle for 20 s
+    (21b: 99 s). Listed before the other top-level curves, it starts as soon as its parent's
+    top-level curve is done (the queue deals the first ready job in this order), and the short
+    jobs fill the queue's end.
 
     Args:
         jobs: the jobs to run (curves, v3 and follow-ups); alts: the layer joints' ``AltJob``s
@@ -379,11 +381,14 @@ def dealing_order(jobs: list[Job], alts: list, n_levels: int, backbones: list[Jo
     """
     curves = sorted((j for j in jobs if j.kind == "curve"),
                     key=lambda j: -1 if j.level_index is None else j.level_index, reverse=True)
-    top = [j for j in curves if j.level_index == n_levels - 1]
     parents = {a.parent for a in alts}
-    rest = sorted((j for j in curves if j not in top), key=lambda j: j.config not in parents)
+    check = [j for j in curves if j.level_index is None]
+    top = [j for j in curves if j.level_index == n_levels - 1]
+    lower = [j for j in curves if j not in top and j not in check]
     return ([j for j in jobs if j.kind == "v3"] + [j for j in jobs if j.kind in FOLLOW_UP]
-            + top + list(alts) + rest + list(backbones))
+            + [j for j in lower if j.config in parents] + [j for j in top if j.config in parents]
+            + list(alts) + [j for j in top if j.config not in parents]
+            + [j for j in lower if j.config not in parents] + check + list(backbones))
 
 
 def backbone_plan(inp: StudyInputs, folder: Path, job: Job):
