@@ -371,8 +371,8 @@ def dealing_order(jobs: list[Job], alts: list, n_levels: int, backbones: list[Jo
     Dealt after every top-level curve and their parent's lower curves, it started at 234-239 s
     of 316-341 s queues (studies 21a-c, session 21) and once ended last, one rank idle for 20 s
     (21b: 99 s). Listed before the other top-level curves, it starts as soon as its parent's
-    top-level curve is done (the queue deals the first ready job in this order), and the short
-    jobs fill the queue's end.
+    top-level curve is done (the queue deals the first ready job in this order; 21d: at 193 s),
+    and the short jobs fill the queue's end.
 
     Args:
         jobs: the jobs to run (curves, v3 and follow-ups); alts: the layer joints' ``AltJob``s
