@@ -25,9 +25,9 @@ import scipy.linalg as sla
 from mpi4py import MPI
 from petsc4py import PETSc
 
-#: columns per block: 8 was fastest on the default model's interior (4 / 8 / 16 / 24: 11.0 /
-#: 9.6 / 11.7 / 14.0 s serially; larger blocks need more vectors, smaller ones more passes over
-#: the basis)
+#: columns per block: 8 on the default model's interior (a serial prototype with the count and
+#: the factorization, 4 / 8 / 16 / 24 columns: 10.9 / 10.9 / 13.0 / 16.5 s, 224 / 280 / 368 / 480
+#: vectors; larger blocks need more vectors, smaller ones more passes over the basis)
 BLOCK = 8
 #: the basis may grow to this many times the wanted pairs, and to at least MIN_VECTORS (plus two
 #: blocks): the default model's 77 modes converged at 280 vectors (3.6 times), the 12 lowest of
