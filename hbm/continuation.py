@@ -58,6 +58,14 @@ from . import stability as stab
 
 #: accepted values of ``ContinuationSettings.stability``
 STABILITY_METHODS = ("auto", "hill", "fold", "none")
+#: accepted values of ``ContinuationSettings.predictor``. The tangent at each accepted point costs
+#: a friction Jacobian and a bordered solve at the Krylov tolerance: on the default model's
+#: top-level sweeps 145 tangents took 22 of 64 s (GMRES ~47 iterations each, issue 16). The
+#: secant through the last two points costs nothing and is oriented by the direction of travel;
+#: the corrector needs a few more iterations on curved stretches (baseline@L1 3.3 -> 3.7 per
+#: point). Where the branch has no secant yet (its first point) or lies beyond a corner restart
+#: (the piece beyond a corner fold), the tangent is still solved for.
+PREDICTORS = ("secant", "tangent")
 
 #: t . t_prev below which a tangent found by GMRES (no determinant sign) is oriented again with
 #: exact signs: the turn may be a corner fold. The tangent flips met at points reached without a
@@ -173,6 +181,10 @@ class ContinuationSettings:
         max_damp: largest relative change of the response amplitude per step, in (0, inf) (a
             step is halved otherwise), so the response DOF's peak is resolved even in a mode the
             contacts hardly see.
+        predictor: "secant" (the default): the next point is predicted along the secant through the
+            last two points, and the bordered system is solved only by the corrector; "tangent":
+            along the branch's tangent, one more linear solve (and friction Jacobian) per point.
+            See :data:`PREDICTORS`.
         tight_tol: None, or the (Newton, GMRES) tolerances, each in (0, 1), the branch goes on
             with once it thrashes at a fold (:data:`THRASH_TURNS`) or its step fell below
             ``ds_min``: the solver's ``tol`` and ``krylov_tol`` are set to them, and the branch
@@ -193,6 +205,7 @@ class ContinuationSettings:
     max_domega: float | None = None
     max_damp: float = 0.1
     tight_tol: tuple[float, float] | None = None
+    predictor: str = "secant"
 
     def __post_init__(self) -> None:
         def put(name, value):                 # frozen: normalized values are set once, here
@@ -214,6 +227,9 @@ class ContinuationSettings:
                 raise ValueError("ContinuationSettings.tight_tol must be None or a pair (Newton, "
                                  f"GMRES) of tolerances in (0, 1), got {tt!r}")
             put("tight_tol", (float(tt[0]), float(tt[1])))
+        if not isinstance(self.predictor, str) or self.predictor not in PREDICTORS:
+            raise ValueError(f"ContinuationSettings.predictor must be one of {'|'.join(PREDICTORS)}, "
+                             f"got {self.predictor!r}")
         if not isinstance(self.stability, str) or self.stability not in STABILITY_METHODS:
             raise ValueError(f"ContinuationSettings.stability must be one of {'|'.join(STABILITY_METHODS)}, "
                              f"got {self.stability!r}")
@@ -414,6 +430,12 @@ def _adapt_step(ds: float, iterations: int, ds_max: float) -> float:
     return ds
 
 
+def _middle_slope(h1: float, s1: float, h2: float, s2: float) -> float:
+    """dw/ds at the middle of three points from the parabola through them: segments of lengths h1,
+    h2 whose unit secants have w-components s1, s2 (scaled unknowns)."""
+    return (h1 * s2 + h2 * s1) / (h1 + h2)
+
+
 def _turning_points(taus: np.ndarray) -> list[int]:
     """Indices i >= 1 where the w-component of the tangent changed sign from point i - 1."""
     s = np.sign(taus)
@@ -521,6 +543,10 @@ class _Branch:
         self.keep_jac = 2 * hb.nH * hb.s.n <= stab.HILL_LIMIT
         self.t_beyond = None      # tangent of the piece beyond the last corner restart
         self.sols, self.taus = [sol], [self.t[-1]]
+        # per point: the length and w-component of the secant step that reached it (scaled),
+        # None where its direction is a solved tangent (the start, beyond a corner, the tangent
+        # predictor)
+        self.seg: list[tuple[float, float] | None] = [None]
         self.path = _Path()
         self.path.append(self.U, w0)
         self.amp_prev = sol.amplitude(dof)
@@ -695,13 +721,17 @@ class _Branch:
         LU), as where the branch may have passed a corner fold within the step."""
         hb, ev = self.hb, corr.ev
         prev = self.t_beyond if beyond_corner else self.t
-        t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, prev, self.ref_sign)
-        exact = sign == 0 and t @ prev < SHARP_TURN
-        if sign == 0 and not exact:
-            sign = self.ref_sign
-        if exact:
-            self._exact_reference()           # at the previous point, so before moving on
-            t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, prev, self.ref_sign, exact_sign=True)
+        if self.settings.predictor == "secant" and not beyond_corner:
+            t, sign = self._secant(corr)
+        else:
+            t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, prev, self.ref_sign)
+            exact = sign == 0 and t @ prev < SHARP_TURN
+            if sign == 0 and not exact:
+                sign = self.ref_sign
+            if exact:
+                self._exact_reference()           # at the previous point, so before moving on
+                t, sign = _tangent(hb, self.force, self.sc, corr.w, ev, prev, self.ref_sign, exact_sign=True)
+            self.seg.append(None)
         self.turns.append(bool(beyond_corner or t @ prev < SHARP_TURN))
         # the reference of the next orientation: this point's sign, found or carried
         self.U, self.w, self.t, self.ref_sign = corr.U, corr.w, t, sign
@@ -710,6 +740,27 @@ class _Branch:
         self.amp_prev = self.sols[-1].amplitude(self.dof)
         self.taus.append(self.t[-1])
         self.ds = _adapt_step(self.ds, corr.it, self.settings.ds_max)
+
+    def _secant(self, corr: _Correction) -> tuple[np.ndarray, int]:
+        """The secant predictor at the corrected point ``corr`` (``ContinuationSettings.predictor``):
+        the unit direction from the current point to it, and the determinant sign carried on.
+
+        The secant is oriented by the direction of travel, so it needs no determinant sign of its
+        own. The branch's sign (``ref_sign``, the orientation a corner restart's tangent gets) is
+        carried on through smooth steps; after a sharp turn (t . t_prev < SHARP_TURN: a corner may
+        lie within the step) it is unknown (0) and found again, by a dense LU, only if a corner
+        restart needs it (``_exact_reference``). The point's w-component (``taus``, the turning
+        points) is the secant's until the next point arrives; then the previous point's becomes the
+        derivative of the parabola through its two neighbours (:func:`_middle_slope`), a tangent's
+        to O(ds^2).
+        """
+        sec = self.sc.Y(corr.U, corr.w) - self.sc.Y(self.U, self.w)
+        h = float(np.linalg.norm(sec))
+        t = sec / h
+        if self.seg[-1] is not None:
+            self.taus[-1] = _middle_slope(*self.seg[-1], h, t[-1])
+        self.seg.append((h, t[-1]))
+        return t, (self.ref_sign if t @ self.t >= SHARP_TURN else 0)
 
     def _tighten_if_thrashing(self) -> None:
         """Go on at ``settings.tight_tol`` once the branch thrashes at a fold (:data:`THRASH_TURNS`
@@ -745,7 +796,7 @@ class _Branch:
             self.tightened_at = len(self.sols)
             return True
         t, sign = _tangent(hb, self.force, self.sc, corr.w, corr.ev, sec, None)
-        del self.sols[k:], self.taus[k:], self.amps[k:]
+        del self.sols[k:], self.taus[k:], self.amps[k:], self.seg[k:]
         self.path.truncate(k)
         self.turns[k - 1:] = [False]          # one per point after the first, the new one's too
         self.U, self.w, self.t, self.ref_sign, self.t_beyond = corr.U, corr.w, t, sign, None
@@ -754,6 +805,7 @@ class _Branch:
         self.amp_prev = self.sols[-1].amplitude(self.dof)
         self.amps.append(self.amp_prev)
         self.taus.append(self.t[-1])
+        self.seg.append(None)
         self.tightened_at = k
         return True
 

@@ -84,7 +84,7 @@ def softening_oscillator(harmonics=3, samples=64):
 @pytest.mark.parametrize("name, value", [
     ("max_points", 0), ("max_points", 2.5), ("ds", 0.0), ("ds", np.inf), ("ds_max", -0.1),
     ("ds_min", 0.0), ("max_corrector", 0), ("stability", "floquet"), ("max_domega", 0.0),
-    ("max_domega", np.nan), ("max_damp", -1.0), ("max_damp", np.inf)])
+    ("max_domega", np.nan), ("max_damp", -1.0), ("max_damp", np.inf), ("predictor", "euler")])
 def test_settings_validation_names_the_field(name, value):
     with pytest.raises(ValueError, match=rf"ContinuationSettings\.{name} must be"):
         ContinuationSettings(**{name: value})
@@ -189,12 +189,54 @@ def test_fold_branch_is_the_same_whichever_solver_takes_each_point():
     assert np.max(np.abs(a.omega - b.omega)) <= 1e-8 * a.omega.max()
 
 
+def test_the_secant_predictor_traces_the_tangent_predictors_branch(monkeypatch):
+    """The softening oscillator's two folds with either predictor: the secant one solves for a
+    tangent only at the start (none on smooth stretches: one linear solve per point fewer),
+    finds the same two turning points (fold parity marks as many points unstable) at the same
+    frequencies to the spacing of the points around them, and ends on the same solution."""
+    import hbm.continuation as cont
+    runs, tangents = {}, []
+    tangent = cont._tangent
+
+    def counting(*args, **kwargs):
+        tangents.append(1)
+        return tangent(*args, **kwargs)
+    monkeypatch.setattr(cont, "_tangent", counting)
+    for predictor in cont.PREDICTORS:
+        tangents.clear()
+        hb = softening_oscillator()
+        frf = hb.frf(0.6, 2.6, np.array([0.2]), dof=0, ds_max=0.1, stability="fold",
+                     predictor=predictor)
+        runs[predictor] = (frf, len(tangents), hb.stats["linear_solves"])
+    (a, ta, la), (b, tb, lb) = runs["tangent"], runs["secant"]
+    assert ta == len(a.omega) and tb == 1 and lb < la - 0.5 * len(b.omega)
+    assert len(a.turning_points) == len(b.turning_points) == 2
+    assert (~a.stable).sum() == (~b.stable).sum() > 0
+    for ia, ib in zip(a.turning_points, b.turning_points):
+        spacing = np.abs(np.diff(b.omega[ib - 2:ib + 3])).max()
+        assert abs(a.omega[ia] - b.omega[ib]) <= spacing
+    assert a.omega[-1] == b.omega[-1] == 2.6
+    assert abs(a.amplitude[-1] / b.amplitude[-1] - 1) <= 1e-8
+
+
+def test_middle_slope_is_the_parabolas_derivative():
+    """The secant predictor's turning points use dw/ds at a point from its two neighbours: exact
+    for a parabola w(s) through three unevenly spaced points."""
+    import hbm.continuation as cont
+    w = lambda s: 0.3 - 2.0 * (s - 0.1) ** 2            # noqa: E731 (dw/ds = -4 (s - 0.1))
+    s0, s1, s2 = -0.05, 0.02, 0.2
+    h1, h2 = s1 - s0, s2 - s1
+    got = cont._middle_slope(h1, (w(s1) - w(s0)) / h1, h2, (w(s2) - w(s1)) / h2)
+    assert got == pytest.approx(-4.0 * (s1 - 0.1), rel=1e-12)
+
+
 def test_oriented_determinant_sign_is_a_branch_invariant(monkeypatch):
     """The oriented bordered-determinant sign is the same at every point and corner restart of a
     branch, through folds. Without a solver switch (dense path) the previous point's sign, now
     the reference of each orientation, is therefore the start's, the reference before: such
     branches are bitwise those of the former rule. On the GMRES path the sign is unknown (0)
-    except where it was computed exactly (corners, sharp turns), and then it is the dense one."""
+    except where it was computed exactly (corners, sharp turns), and then it is the dense one.
+    The tangent predictor (a sign at every point); the secant one's are tested below."""
     import hbm.continuation as cont
     signs = []
     tangent = cont._tangent
@@ -209,28 +251,31 @@ def test_oriented_determinant_sign_is_a_branch_invariant(monkeypatch):
     for name, gmres in (("dense", lambda w: False), ("gmres", lambda w: True)):
         signs.clear()
         frf = ForcedPath(s, c, gmres, harmonics=3, samples=64).frf(0.6, 2.6, np.array([0.2]), dof=0,
-                                                                    ds_max=0.1, stability="none")
+                                                                    ds_max=0.1, stability="none",
+                                                                    predictor="tangent")
         assert len(frf.turning_points) == 2 and len(signs) >= len(frf.omega)
         known[name] = set(signs[1:]) - {0}      # signs[0]: the start's, before its orientation
         assert len(known[name]) == 1
     assert 0 in signs and known["dense"] == known["gmres"]
 
 
-def test_gmres_path_passes_corner_folds_like_the_dense_path():
+@pytest.mark.parametrize("predictor, min_lus", [("tangent", 8), ("secant", 2)])
+def test_gmres_path_passes_corner_folds_like_the_dense_path(predictor, min_lus):
     """Mass on an inclined preloaded friction contact (tangential and normal gap both follow x),
     n_t = 32: the branch turns by more than 90 deg at corners of the sampled law (8 tangent
     flips, no fold in frequency). Every solve on the GMRES path, which has no determinant sign,
     must give the dense path's branch: the corner signs are then taken from a dense LU. (With
-    t . t_prev > 0 alone the branch went back the way it came and the step fell below ds_min.)"""
+    t . t_prev > 0 alone the branch went back the way it came and the step fell below ds_min.)
+    The secant predictor meets fewer corners head-on (2 restarts against 4), so fewer LUs."""
     s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
     c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
     runs = {}
     for name, gmres in (("dense", lambda w: False), ("gmres", lambda w: True)):
         hb = ForcedPath(s, c, gmres, harmonics=1, samples=32)
-        runs[name] = hb.frf(0.4, 2.5, np.array([0.4]), dof=0, stability="none")
+        runs[name] = hb.frf(0.4, 2.5, np.array([0.4]), dof=0, stability="none", predictor=predictor)
         runs[name + " LUs"] = hb.stats["sign_factorizations"]
     a, b = runs["dense"], runs["gmres"]
-    assert runs["dense LUs"] == 0 and runs["gmres LUs"] >= 8
+    assert runs["dense LUs"] == 0 and runs["gmres LUs"] >= min_lus
     for r in (a, b):
         assert r.omega[-1] == 2.5 and np.all(np.diff(r.omega) > 0) and not r.turning_points
     # same points; at the corners near the peak the amplitude is sensitive (1e-6 apart there)
@@ -303,34 +348,41 @@ def test_a_step_below_ds_min_goes_back_and_on_at_the_tight_tolerance(monkeypatch
     assert abs(frf.amplitude[-1] / ref.amplitude[-1] - 1) <= 1e-9
 
 
-def test_carried_sign_is_the_exact_sign_at_every_corner(monkeypatch):
+@pytest.mark.parametrize("predictor, min_restarts", [("tangent", 4), ("secant", 2)])
+def test_carried_sign_is_the_exact_sign_at_every_corner(monkeypatch, predictor, min_restarts):
     """The inclined contact's branch on the GMRES path: at every corner restart, the
-    determinant sign carried along the branch from the last exact one equals the sign a dense
-    LU gives at the current point (what the former rule computed there: 23 sign LUs on this
-    branch, 14 now). The first restart's too: a branch that starts with a small reduced system
-    takes its sign at the start (``START_SIGN_SIZE``)."""
+    determinant sign the restart orients its tangent by equals the sign a dense LU gives at the
+    current point. With the tangent predictor it is the sign carried along the branch from the
+    last exact one (what the former rule computed there: 23 sign LUs on this branch, 14 now), at
+    the first restart too: a branch that starts with a small reduced system takes its sign at
+    the start (``START_SIGN_SIZE``). The secant predictor forgets the sign at a sharp turn (a
+    corner may lie within the step): the restart after one finds it again by a dense LU where
+    the turn beyond the corner is sharp (here at the first of its two restarts)."""
     import hbm.continuation as cont
-    checks, restarts = [], []
+    checks = []
     restart = cont._Branch._corner_restart
 
     def checked(self, Y, Yp, failed):
-        restarts.append(self.w)
-        if self.ref_sign:
-            ev = cont._evaluate(self.hb, self.force, self.U, self.w)
-            _, fresh = cont._tangent(self.hb, self.force, self.sc, self.w, ev, self.t, None,
-                                     exact_sign=True)
-            checks.append((self.ref_sign, fresh))
-            self.hb.stats["sign_factorizations"] -= 1          # the check's LU is not the branch's
-        return restart(self, Y, Yp, failed)
+        ev = cont._evaluate(self.hb, self.force, self.U, self.w)
+        _, fresh = cont._tangent(self.hb, self.force, self.sc, self.w, ev, self.t, None,
+                                 exact_sign=True)
+        self.hb.stats["sign_factorizations"] -= 1          # the check's LU is not the branch's
+        carried = self.ref_sign
+        out = restart(self, Y, Yp, failed)
+        checks.append((carried, self.ref_sign, fresh))
+        return out
     monkeypatch.setattr(cont._Branch, "_corner_restart", checked)
     s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
     c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
     hb = ForcedPath(s, c, lambda w: True, harmonics=1, samples=32)
-    frf = hb.frf(0.4, 2.5, np.array([0.4]), dof=0, stability="none")
-    assert frf.omega[-1] == 2.5 and len(restarts) >= 4
-    # a sign is known at every restart, the first included: no LU at the current point
-    assert len(checks) == len(restarts)
-    assert all(carried == fresh for carried, fresh in checks)
+    frf = hb.frf(0.4, 2.5, np.array([0.4]), dof=0, stability="none", predictor=predictor)
+    assert frf.omega[-1] == 2.5 and len(checks) >= min_restarts
+    # the sign a restart had (0: none needed, its turn was small, ``_small_turn``) is the exact one
+    assert all(used in (0, fresh) and fresh != 0 for _, used, fresh in checks)
+    assert any(used == fresh for _, used, fresh in checks)
+    if predictor == "tangent":
+        # a sign is known at every restart, the first included: no LU at the current point
+        assert all(carried == fresh for carried, _, fresh in checks)
 
 
 def test_a_stalled_corrector_gives_up_early(monkeypatch):
@@ -365,10 +417,12 @@ def test_a_stalled_corrector_gives_up_early(monkeypatch):
 
 def _inclined_gmres_frf():
     """The inclined contact's FRF (ω 0.4 … 2.5, force 0.4, H = 1, 32 samples) on the GMRES path,
-    without stability: (FRFResult, its ContinuationSettings)."""
+    without stability, with the tangent predictor (whose steps run head-on into the corners, the
+    failed correctors these tests look at; the secant's meet 2 restarts, no stall): (FRFResult,
+    its ContinuationSettings)."""
     s = LinearStructure([[1.0]], [[1.0]], [[0.02]])
     c = FrictionContacts(np.array([[[0, -1, 0], [-1, -1, -1]]]), kt=2.0, kn=2.0, mu=0.3, n0=0.2)
-    settings = ContinuationSettings(stability="none")
+    settings = ContinuationSettings(stability="none", predictor="tangent")
     return (ForcedPath(s, c, lambda w: True, harmonics=1, samples=32).frf(
         0.4, 2.5, np.array([0.4]), dof=0, settings=settings), settings)
 
