@@ -404,6 +404,10 @@ def _correct(hb, force: np.ndarray, sc: _Scaling, Yp: np.ndarray, t: np.ndarray,
         # harmonic_balance.KRYLOV_FORCING); the tangent (``_tangent``) stays at krylov_tol
         [(dU, dw)], _ = hb.linsolve_aug(w, ev.nl, ev.Dg, Rw, tU, tw, [(ev.R, cval)],
                                         atol=[hb.step_atol(ev.scale)])
+        if not (np.all(np.isfinite(dU)) and np.isfinite(dw)):
+            # a singular bordered system (its LU met a zero pivot): no corner restart from here
+            # (its tangent's system is singular too), the caller shortens the step
+            return _Correction(False, U, w, None, it)
         alpha, Ut, wt, evt, decreased = _line_search(hb, force, U, w, dU, dw, r)
         if wt <= 0 or evt is None:
             return _Correction(False, U, w, ev, it)
@@ -675,6 +679,12 @@ class _Branch:
             self._exact_reference()
             tb, _ = _tangent(self.hb, self.force, self.sc, wp, evp, self.t, self.ref_sign,
                              exact_sign=True)
+        if not np.all(np.isfinite(tb)):
+            # the bordered system at the predictor is singular with the current direction as its
+            # last row (an LU's zero pivot: on 22b's model baseline@L2 met one 2 GMRES failures
+            # and 13 LUs later, NaN frequencies in its corrector): no restart from this
+            # predictor, the caller halves the step
+            return failed, False
         self.t_beyond = tb
         Yc = self.sc.Y(failed.U, failed.w)
         corr = _correct(self.hb, self.force, self.sc, Yc + self.ds * tb, tb, self.settings.max_corrector)

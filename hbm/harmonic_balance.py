@@ -537,6 +537,7 @@ class HarmonicBalance:
                 J = self._dense_fallback(omega, nl, Dg)
         if J is not None:
             X = lu_solve(J, B, self.stats)
+            self._check_singular(X)
         return [r - self._expand(omega, nl, cn, idx, Dg, X[:, i]) for i, r in enumerate(rhs)]
 
     def linsolve_bordered(self, omega: float, nl: np.ndarray, Dg, cols: list[np.ndarray],
@@ -598,6 +599,16 @@ class HarmonicBalance:
             self._dense_left, self._dense_size = DENSE_AFTER_FALLBACK, P
         self._gmres_failed = True
         return self._reduced(omega, nl, Dg, dense=True, out=out)[3]
+
+    def _check_singular(self, X: np.ndarray) -> None:
+        """After an LU solve: a non-finite solution means the system is singular (a zero pivot),
+        so a GMRES failure on it was not the preconditioner's: the systems after it go back to
+        GMRES instead of ``DENSE_AFTER_FALLBACK`` LUs. (With the secant predictor, 22b's model's
+        baseline@L2 met a corner-restart predictor whose bordered systems were singular: its
+        corrector's and its tangent's GMRES failed, and the ten LUs after them took 60 of 125 s.)
+        The caller sees the non-finite solution and fails the step."""
+        if not np.all(np.isfinite(X)):
+            self._gmres_failed, self._dense_left = False, 0
 
     def _after_fallback(self, P: int, count: bool = True) -> bool:
         """True for a system solved directly by LU because GMRES failed on two in a row, about
@@ -682,6 +693,7 @@ class HarmonicBalance:
                 Z, sign = lu_solve_sign(A, Bm, self.stats, matvec=mv64, rebuild=rebuild)
             else:
                 Z, sign = lu_solve_sign(A, Bm, self.stats)
+            self._check_singular(Z)
         out = []
         for i, (R, c) in enumerate(rhs):
             xN, dw = Z[:P, i], Z[P, i]

@@ -672,3 +672,48 @@ def test_a_branch_starting_small_on_the_gmres_path_takes_its_sign_there(monkeypa
     hb = ForcedPath(s, c, lambda w: True, harmonics=1, samples=256)
     assert cn._Branch(hb, f, 0, 0.7, 1.8, settings).ref_sign == 0
     assert hb.stats["sign_factorizations"] == 0
+
+
+def test_a_singular_system_shortens_the_step_and_keeps_gmres(monkeypatch):
+    """A corrector's bordered system that is singular (GMRES fails on it and the fallback LU meets
+    a zero pivot: a non-finite step): the step is shortened without a corner restart from there,
+    and the solves after it stay on GMRES (no ``DENSE_AFTER_FALLBACK`` LUs, which took 60 of
+    125 s of a top-level sweep on the default model). The branch is the one without the fault."""
+    import hbm.continuation as cont
+    import hbm.harmonic_balance as hbmod
+    from hbm import ConvergenceError
+    f = np.array([0.2])
+    s, c = softening_oscillator().s, softening_oscillator().c
+    ref = ForcedPath(s, c, lambda w: True, harmonics=3, samples=64).frf(
+        0.6, 2.6, f, dof=0, ds_max=0.1, stability="none")
+    hb = ForcedPath(s, c, lambda w: True, harmonics=3, samples=64)
+    calls, pending, restarts = [0], [False], []
+    krylov, lu = hb._krylov, hbmod.lu_solve_sign
+
+    def failing(*args, **kwargs):
+        calls[0] += 1
+        if calls[0] in (60, 61):              # a corrector's system, and (GMRES again) the next
+            pending[0] = True
+            raise ConvergenceError("GMRES did not converge (test)", 1.0)
+        return krylov(*args, **kwargs)
+
+    def singular(*args, **kwargs):
+        Z, sign = lu(*args, **kwargs)
+        if pending[0]:
+            pending[0] = False
+            Z = np.full_like(Z, np.nan)
+        return Z, sign
+    restart = cont._Branch._corner_restart
+
+    def counted(self, *args):
+        restarts.append(self.w)
+        return restart(self, *args)
+    monkeypatch.setattr(hb, "_krylov", failing)
+    monkeypatch.setattr(hbmod, "lu_solve_sign", singular)
+    monkeypatch.setattr(cont._Branch, "_corner_restart", counted)
+    frf = hb.frf(0.6, 2.6, f, dof=0, ds_max=0.1, stability="none")
+    assert calls[0] > 61 and hb.stats["dense_fallbacks"] == 2
+    assert hb.stats["dense_after_fallback"] == 0 and not restarts
+    assert frf.omega[-1] == ref.omega[-1] == 2.6
+    assert abs(frf.amplitude[-1] / ref.amplitude[-1] - 1) <= 1e-8
+    assert len(frf.turning_points) == len(ref.turning_points) == 2
