@@ -3,7 +3,10 @@
 * Scaled unknowns Y = (U / u_s, w / w_s): w_s is the start frequency, u_s the norm of the current
   solution (updated every step, so steps are relative changes), and the frequency step is capped
   at ``max_domega`` (default range/100) so that flat parts cannot step over a narrow peak.
-* Tangent predictor: null vector of [J, dR/dw] from the bordered system with the previous tangent
+* Predictor (``ContinuationSettings.predictor``): the secant through the last two points (the
+  default, ``PREDICTORS``), oriented by the direction of travel; the tangent below is solved at a
+  branch's start, beyond a corner restart, and at every point with ``"tangent"``.
+* Tangent: null vector of [J, dR/dw] from the bordered system with the previous tangent
   as last row, oriented so that the sign of the bordered determinant is that of the previous
   point: with a consistently oriented tangent that sign is an invariant of the branch (it changes
   only at a branch point). The sign comes with the dense path's LU; a point solved by GMRES has
@@ -62,8 +65,8 @@ STABILITY_METHODS = ("auto", "hill", "fold", "none")
 #: a friction Jacobian and a bordered solve at the Krylov tolerance: on the default model's
 #: top-level sweeps 145 tangents took 22 of 64 s (GMRES ~47 iterations each, issue 16). The
 #: secant through the last two points costs nothing and is oriented by the direction of travel;
-#: the corrector needs a few more iterations on curved stretches (baseline@L1 3.3 -> 3.7 per
-#: point). Where the branch has no secant yet (its first point) or lies beyond a corner restart
+#: the corrector needs a few more iterations on curved stretches (baseline@L1: 4.0 -> 4.3
+#: residuals per point, 336 -> 274 linear solves in all). Where the branch has no secant yet (its first point) or lies beyond a corner restart
 #: (the piece beyond a corner fold), the tangent is still solved for.
 PREDICTORS = ("secant", "tangent")
 
@@ -681,9 +684,8 @@ class _Branch:
                              exact_sign=True)
         if not np.all(np.isfinite(tb)):
             # the bordered system at the predictor is singular with the current direction as its
-            # last row (an LU's zero pivot: on 22b's model baseline@L2 met one 2 GMRES failures
-            # and 13 LUs later, NaN frequencies in its corrector): no restart from this
-            # predictor, the caller halves the step
+            # last row (an LU's zero pivot; a NaN tangent made NaN frequencies in the restart's
+            # corrector): no restart from this predictor, the caller halves the step
             return failed, False
         self.t_beyond = tb
         Yc = self.sc.Y(failed.U, failed.w)
@@ -722,7 +724,10 @@ class _Branch:
                                         exact_sign=True)
 
     def _accept(self, corr: _Correction, beyond_corner: bool = False) -> None:
-        """Make the corrected point current: new tangent, Solution, amplitude, next step.
+        """Make the corrected point current: new direction, Solution, amplitude, next step.
+
+        With the secant predictor the new direction is the secant to the point (:meth:`_secant`),
+        except beyond a corner restart, where the tangent of the new piece is solved as below.
 
         The new tangent is found with the tangent of the piece the point lies on as last row:
         the previous point's, or after a corner restart (``beyond_corner``) ``t_beyond``. A GMRES
