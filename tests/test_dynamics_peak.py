@@ -303,6 +303,7 @@ def test_speed_tables_measure_the_frf_peak() -> None:
     cold-start solve at the peak frequency (which landed on the lower branch of the resonator's
     fold): at the study's own H and n_t the row equals the full sweep's polished peak; each row
     equals a full sweep's peak at its own H and n_t; the last row is the reference (0 error)."""
+    from fe_joint.study import frf as F
     from fe_joint.study import speed_error as se
     rm, joint, level = _two_grounded_masses(), _joint(2e4), 5.0
     cr, contact = _sweep(rm, joint, level)
@@ -319,9 +320,11 @@ def test_speed_tables_measure_the_frf_peak() -> None:
     # H = 3 with 256 samples, started from the H = 1 peak (padded with zeros): a sweep's peak
     f3 = stuck_modes(rm.K, rm.M, rm.pair_dofs, joint).frequency
     sweep3, _ = frf_with_peak(rm, joint, level, f3, SweepSettings(3, 256, (0.8, 1.1), 400, 0.5))
-    assert abs(hr[1]["peak [Hz]"] / sweep3.peak_hz - 1) <= 1e-7
+    # equal to the search's resolution (F.PEAK_XTOL): the row and the sweep search from starts
+    # on either side of the peak
+    assert abs(hr[1]["peak [Hz]"] / sweep3.peak_hz - 1) <= F.PEAK_XTOL
     assert abs(hr[1]["amplitude [µm]"] / (1e3 * sweep3.peak_amplitude) - 1) <= 1e-6
-    assert abs(hr[1]["peak [Hz]"] / same["peak [Hz]"] - 1) > 1e-6       # H matters here
+    assert abs(hr[1]["peak [Hz]"] / same["peak [Hz]"] - 1) > 10 * F.PEAK_XTOL   # H matters here
 
 
 def test_reference_of_a_curve_saved_without_its_peak_contact_says_so() -> None:
@@ -471,7 +474,8 @@ def test_corner_peak_is_the_flanks_intersection_from_any_start() -> None:
     """A resonance peak that is a corner of the sampled friction law (one element, H = 1, 32
     samples, k_t = 2e4, 5 N: the amplitude is linear on either side, slopes ≈ +3.8 and −3.7 in
     dX/X over dω/ω) is located at the intersection of its two flanks, from starts 1e-4 below to
-    1e-4 above it, to 1e-9 in frequency. The reference is independent of the search: straight
+    1e-4 above it, to the search's resolution ``PEAK_XTOL`` in frequency. The reference is
+    independent of the search: straight
     fitted through tight solves on each flank (5e-7 … 5e-6 from the corner). The previous
     refinement (Newton on a central difference, h = 1e-5) put this peak 1.6e-7 above the corner
     with an amplitude 5.9e-7 low: the root of X(ω(1+h)) = X(ω(1−h)) lies h(a − b)/(a + b) from
@@ -502,9 +506,11 @@ def test_corner_peak_is_the_flanks_intersection_from_any_start() -> None:
         found.append((peak.omega / (2 * np.pi), peak.amplitude(0)))
         assert (hb.tol, hb.krylov_tol) == F.SWEEP_TOLERANCES[0]      # restored
     f, x = np.array(found).T
-    assert np.abs(f / f_corner - 1).max() < 1e-9, f / f_corner - 1
-    assert np.abs(x / x_corner - 1).max() < 1e-9, x / x_corner - 1
-    assert np.ptp(f) / f_corner < 1e-9
+    # to the search's resolution F.PEAK_XTOL in frequency (measured 5.5e-8 at 1e-6; 1e-10 at
+    # 1e-9), and in amplitude to the flanks' slopes (< 4) times it (measured 2.0e-7)
+    assert np.abs(f / f_corner - 1).max() < F.PEAK_XTOL, f / f_corner - 1
+    assert np.abs(x / x_corner - 1).max() < 4 * F.PEAK_XTOL, x / x_corner - 1
+    assert np.ptp(f) / f_corner < F.PEAK_XTOL
 
 
 def test_smooth_peak_is_the_parabolas_vertex_from_any_start() -> None:
@@ -556,13 +562,15 @@ def test_interpolated_starts_save_newton_iterations_for_the_same_peak(monkeypatc
             got[interpolated] = (peak.omega, peak.amplitude(0), hb.stats["jacobians"] - n0)
         (w0, x0, n_near), (w1, x1, n_interp) = got[False], got[True]
         assert w1 == pytest.approx(w0, rel=1e-12) and x1 == pytest.approx(x0, rel=1e-12), kt
-        assert n_interp < 0.8 * n_near, (kt, n_interp, n_near)
+        # 42 against 53 (k_t = 2e4) and 48 (2e3) with PEAK_XTOL = 1e-6; 65 against 87 at 1e-9
+        assert n_interp < n_near, (kt, n_interp, n_near)
 
 
 def test_a_top_the_sweep_stepped_over_is_resampled_not_traced(monkeypatch) -> None:
     """Where the sweep's steps next to its largest point exceed PEAK_GAP, the two steps are
     resampled by fixed-frequency solves (SCAN_SUBDIVISIONS per step, no continuation): the
-    peak equals the one found from the finely traced branch (the scan turned off) to 1e-9, no
+    peak equals the one found from the finely traced branch (the scan turned off) to the
+    search's resolution (``PEAK_XTOL``), no
     branch is traced, and the resampled points are sorted and include the sweep's three."""
     from fe_joint.study import frf as F
     calls = {"local": 0, "scan": []}
@@ -593,8 +601,10 @@ def test_a_top_the_sweep_stepped_over_is_resampled_not_traced(monkeypatch) -> No
         traced, _ = _sweep(rm, _joint(kt), level)
         monkeypatch.setattr(F, "_scan_top", kept_scan)
         assert calls["local"] == 1, kt
-        assert cr.peak_hz == pytest.approx(traced.peak_hz, rel=1e-9), kt
-        assert cr.peak_amplitude == pytest.approx(traced.peak_amplitude, rel=1e-9), kt
+        # the two searches start from different points: equal to the search's resolution
+        # (measured 1.1e-8 in f, 3.9e-8 in amplitude with PEAK_XTOL = 1e-6; 4e-14 at 1e-9)
+        assert cr.peak_hz == pytest.approx(traced.peak_hz, rel=F.PEAK_XTOL), kt
+        assert cr.peak_amplitude == pytest.approx(traced.peak_amplitude, rel=4 * F.PEAK_XTOL), kt
 
 
 def test_the_validated_structure_is_kept_per_reduced_model():
