@@ -312,8 +312,10 @@ def test_speed_tables_measure_the_frf_peak() -> None:
     rows = t[se.SAMPLES_TABLE]
     same = rows[-1]                                   # H = 1, 32 samples: the sweep's settings
     assert (same["harmonics"], same["samples"]) == (1, 32)
-    assert abs(same["peak [Hz]"] / cr.peak_hz - 1) <= 1e-7
-    assert abs(same["amplitude [µm]"] / (1e3 * cr.peak_amplitude) - 1) <= 1e-6
+    # the row's search and the sweep's start from different points: equal to the search's
+    # resolution (measured 1.4e-7 in f with PEAK_XTOL = 1e-6 and the secant local branch)
+    assert abs(same["peak [Hz]"] / cr.peak_hz - 1) <= F.PEAK_XTOL
+    assert abs(same["amplitude [µm]"] / (1e3 * cr.peak_amplitude) - 1) <= 4 * F.PEAK_XTOL
     assert same["f error vs finest [%]"] == 0.0 and rows[0]["amplitude error vs finest [%]"] > 0
     hr = t[se.HARMONICS_TABLE]
     assert [r["harmonics"] for r in hr] == [1, 3] and all(3 <= r["points"] < 80 for r in hr)

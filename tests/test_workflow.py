@@ -366,7 +366,10 @@ def test_tiny_excitation_peak_is_stuck_linear_mode(run: Path) -> None:
 def test_v3_local_peak_search_matches_full_sweep(run: Path) -> None:
     """Every v3 fixed point searched its peaks locally (pass 0 too: this case has no v2 curve to
     take from a full pass-0 sweep); the converged joint's full FRF has the same peak as the last
-    local search (the v3 tolerance is 1e-3)."""
+    local search: in frequency to 1e-4, in amplitude to the v3 tolerance (1e-3). The top is
+    bumpy (corners of the sampled friction law) and the pass's polish and the sweep's refinement
+    may end on neighbouring maxima: 2.9e-4 apart in amplitude on Rq 1 µm here (secant predictor,
+    session 23), 1.1e-4 on the default model's Rq 1 µm with the tangent one."""
     s = _summary(run)
     assert s["v3"]
     for name, v in s["v3"].items():
@@ -374,7 +377,7 @@ def test_v3_local_peak_search_matches_full_sweep(run: Path) -> None:
         assert len(h) >= 2, name
         assert all(x["search"] == "local" for x in h), (name, [x["local_failed"] for x in h])
         assert h[-1]["sweep_peak_hz"] == pytest.approx(h[-1]["peak_hz"], rel=1e-4), name
-        assert h[-1]["sweep_peak_amplitude"] == pytest.approx(h[-1]["peak_amplitude"], rel=1e-4), name
+        assert h[-1]["sweep_peak_amplitude"] == pytest.approx(h[-1]["peak_amplitude"], rel=1e-3), name
         # the peak the report shows is that full FRF's
         assert s["peaks"][f"{name}@L1"]["peak_hz"] == pytest.approx(h[-1]["sweep_peak_hz"], rel=1e-12)
 

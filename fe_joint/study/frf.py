@@ -393,12 +393,14 @@ def _local_branch(hb, force: np.ndarray, dof: int, w: float, start, max_points: 
         SweepIncomplete when the largest point is an end of the branch (no peak within
         ±PEAK_WINDOW); ConvergenceError when Newton fails.
     """
-    # the tangent predictor: with the secant one the small case's v3 (Rq 1 µm) passes polished a
-    # neighbouring bump of its top, 2.9e-4 below the sweep's refined peak (tests/test_workflow.py
-    # asks 1e-4); these branches are short and at the middle level, where the tangent's solve is
-    # cheap (7 % of a middle-level sweep, 24 % of a top-level one: ``hbm.continuation.PREDICTORS``)
+    # the secant predictor, as the sweeps (session 23): the tangent's solve at every point was
+    # 5.6 of the 14.8 s of a default-model v3 job's local branches (v3-rq5: 40.3 -> 35.6 s for the
+    # job). On a bumpy top (corners of the sampled friction law) which neighbouring maximum the
+    # polish lands on depends on the branch's points, whatever the predictor: the small case's
+    # Rq 1 µm passes 2.9e-4 in amplitude from the sweep's refined peak with the secant, the
+    # default model's Rq 1 µm 1.1e-4 with the tangent (study 23a) and 1.7e-7 with the secant
     local = ContinuationSettings(max_points=max_points, max_domega=w * 1e-3, max_damp=0.05,
-                                 stability="none", predictor="tangent")
+                                 stability="none", predictor="secant")
 
     def passed(amps):
         # two points beyond a maximum and 1 % below it (small bumps of the sampled friction
