@@ -16,7 +16,8 @@ finished folder is reused: the stages are cached), then prints
 Exit status 1 when a peak differs by more than ``--f-tol`` (1e-6, the peak search's resolution
 ``frf.PEAK_XTOL``) in frequency or ``--a-tol`` (4e-6) in amplitude, or a point count by more than
 ``--n-tol`` (5 %) — the tolerances of the README's "In parallel" section; 2 when a run fails.
-Backbones are held to the same ones (their frequencies, damping ratios).
+Backbones are compared with the same two (frequencies with ``--f-tol``, damping ratios with
+``--a-tol``), looser than the MPI test's 1e-7 / 1e-5 for them.
 
 ``--perturb EPS --run DIR --curve NAME``: no runs on N ranks; instead the amplification of
 round-off by the dynamics alone. The finished run ``DIR``'s reduced model gets a random
