@@ -22,6 +22,22 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 
+#: an eigenvalue of (K~, M) below RIGID_TOL · max(diag K~ / diag M) belongs to a rigid-body mode.
+#: max(diag K~ / diag M) is a lower bound of the largest eigenvalue, and a rigid mode's
+#: eigenvalue is round-off of it, ~1e-16 of it (1.0 and 0.4 (rad/s)² on the default and quick
+#: models, whose bound is 5.8e14 and 2.7e14); the first elastic one is 2.4e6. 1e-12 sits between
+#: the two by three orders of magnitude each way; the former 1e-9 put the default model's
+#: threshold at 5.8e5, a factor 4 below its breathing mode, which a finer mesh (stiffer
+#: boundary DOFs) would have made rigid (issue 16, session 24)
+RIGID_TOL = 1e-12
+
+
+def rigid_modes(lam: np.ndarray, K: np.ndarray, M: np.ndarray) -> np.ndarray:
+    """Which eigenvalues ``lam`` of (K, M) belong to rigid-body modes (:data:`RIGID_TOL`), (m,) bool."""
+    scale = max(np.max(np.diag(K) / np.diag(M)), 1e-300)
+    return np.asarray(lam) < RIGID_TOL * scale
+
+
 def _check_square(name: str, A, n: int | None) -> np.ndarray:
     A = np.asarray(A.toarray() if sp.issparse(A) else A, dtype=float)
     if A.ndim != 2 or A.shape[0] != A.shape[1] or (n is not None and A.shape[0] != n):
@@ -73,12 +89,18 @@ class LinearStructure:
             raise ValueError("M must be positive definite") from None
         self._receptances: list = []       # [(key, Receptance)], most recent first
 
-    #: receptances a structure keeps (``receptance``): about 90 MB each at 2198 DOFs
-    RECEPTANCES_KEPT = 3
+    #: receptances a structure keeps (``receptance``) at most ...
+    RECEPTANCES_KEPT = 12
+    #: ... and within this many bytes together (about 90 MB each at 2198 DOFs). A rank of the
+    #: study's job queue meets about a dozen joints (curves, v3 passes, backbones, speed rows):
+    #: keeping 3 had it build 41 receptances in the default study, keeping 12 (or all) 34-35,
+    #: each a dense eigh of about 1 s (issue 16, session 24)
+    RECEPTANCE_BYTES = 1.5e9
 
     def receptance(self, B: sp.csr_matrix, k0: np.ndarray) -> "Receptance":
         """The receptance about the base stiffness ``k0`` with contact map ``B``
-        (:class:`Receptance`), kept for the last ``RECEPTANCES_KEPT`` bases (equal B and k0).
+        (:class:`Receptance`), kept for the last ``RECEPTANCES_KEPT`` bases (equal B and k0)
+        that fit in ``RECEPTANCE_BYTES`` together (the latest is always kept).
 
         Its set-up is a dense generalized eigh and a Cholesky solve (1.0 s at 2198 DOFs, most
         of a middle-level curve's set-up); the curves of one joint at several levels, its
@@ -93,8 +115,12 @@ class LinearStructure:
         key = h.hexdigest()
         hit = [G for k, G in self._receptances if k == key]
         G = hit[0] if hit else Receptance(self, B, k0)
-        self._receptances = ([(key, G)] + [(k, g) for k, g in self._receptances if k != key]
-                             )[:self.RECEPTANCES_KEPT]
+        kept, size = [(key, G)], G.nbytes
+        for k, g in self._receptances:
+            if k != key and len(kept) < self.RECEPTANCES_KEPT and size + g.nbytes <= self.RECEPTANCE_BYTES:
+                kept.append((k, g))
+                size += g.nbytes
+        self._receptances = kept
         return G
 
 
@@ -114,7 +140,7 @@ class Receptance:
         Kb = s.K + (B.T @ sp.diags(k0) @ B).toarray()
         lam, Phi = sla.eigh(Kb, s.M, subset_by_index=[0, m - 1])
         scale = max(np.max(np.diag(Kb) / np.diag(s.M)), 1e-300)
-        rigid = lam < 1e-9 * scale
+        rigid = rigid_modes(lam, Kb, s.M)
         lam = np.where(rigid, 0.0, lam)
         self.lam, self.Phi, self.rigid = lam, Phi, rigid
         self.Kb = Kb
@@ -143,6 +169,14 @@ class Receptance:
             Pe = self.Psi[:, el]
             self.R = Gel - (Pe / lam[el]) @ Pe.T
             self.R = 0.5 * (self.R + self.R.T)
+
+    @property
+    def nbytes(self) -> int:
+        """Memory of the arrays the receptance keeps (its base, modes, factor and R), bytes."""
+        arrays = [self.Kb, self.Phi, self.Psi, self.R, self.lam, self.Cm]
+        if self._chol is not None:
+            arrays.append(self._chol[0])
+        return int(sum(a.nbytes for a in arrays))
 
     # ------------------------------------------------------------------ modal factors
     def modal(self, h: int, omega: float) -> np.ndarray:

@@ -49,6 +49,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from .errors import ConvergenceError
+from .structure import RIGID_TOL
 
 STUCK, STICK_SLIP, GROSS_SLIP, PARTLY_OPEN, OPEN = 0, 1, 2, 3, 4
 #: fraction of the steps spent slipping above which a closed element counts as gross slip
@@ -332,7 +333,7 @@ class BaseModes:
 
 
 def stuck_modal_damping(M, K, base_stiffness, C=None, damping_ratio: float | None = None,
-                        rigid_tol: float = 1e-9) -> BaseModes:
+                        rigid_tol: float = RIGID_TOL) -> BaseModes:
     """All modes of K~ = K + base_stiffness, with modal damping (the HBM's damping model).
 
     Args:
@@ -340,7 +341,8 @@ def stuck_modal_damping(M, K, base_stiffness, C=None, damping_ratio: float | Non
         base_stiffness: (n, n) stiffness of the contacts stuck at rest, N/mm.
         C: optional (n, n) damping, N·s/mm; must be diagonal in the base modes.
         damping_ratio: modal damping ratio zeta of every elastic base mode (instead of C).
-        rigid_tol: eigenvalues below rigid_tol · max(diag K~ / diag M) are rigid-body modes.
+        rigid_tol: eigenvalues below rigid_tol · max(diag K~ / diag M) are rigid-body modes
+            (``hbm.structure.RIGID_TOL``).
 
     Returns:
         BaseModes.

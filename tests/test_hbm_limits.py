@@ -175,6 +175,28 @@ def test_receptances_are_kept_per_base_stiffness():
     assert np.abs(s.receptance(B, k0).matrix(1, 2.0) - fresh.matrix(1, 2.0)).max() == 0.0
 
 
+def test_receptances_kept_within_their_byte_budget(monkeypatch):
+    """The kept receptances fit in RECEPTANCE_BYTES together: with room for two, the third
+    newest falls out; the newest is kept even when it alone exceeds the budget."""
+    n = 12
+    M, K = chain(n)
+    s = LinearStructure(M, K, 0.002 * K, n_modes=4)
+    B = _contact_operator(np.array([[[3, -1, -1], [7, -1, -1]]]), n)
+    k0 = np.array([30.0, 0, 0])
+    G1 = s.receptance(B, k0)
+    assert G1.nbytes == sum(a.nbytes for a in (G1.Kb, G1.Phi, G1.Psi, G1.R, G1.lam, G1.Cm,
+                                               G1._chol[0]))
+    monkeypatch.setattr(LinearStructure, "RECEPTANCE_BYTES", 2.5 * G1.nbytes)
+    G2 = s.receptance(B, 2 * k0)
+    assert s.receptance(B, k0) is G1                   # two fit: G1 still kept (now newest)
+    G3 = s.receptance(B, 3 * k0)                        # G2 is the oldest of three: out
+    assert s.receptance(B, 3 * k0) is G3 and s.receptance(B, k0) is G1
+    assert s.receptance(B, 2 * k0) is not G2
+    monkeypatch.setattr(LinearStructure, "RECEPTANCE_BYTES", 1.0)
+    G4 = s.receptance(B, 4 * k0)
+    assert s.receptance(B, 4 * k0) is G4 and s.receptance(B, k0) is not G1
+
+
 def test_krylov_path_matches_direct():
     n = 30
     M, K = chain(n, free=True)

@@ -275,6 +275,74 @@ def test_stuck_receptance_against_a_direct_solve():
     assert np.allclose(stuck_receptance(rm, joint, f), direct, rtol=1e-9, atol=0)
 
 
+def test_stuck_receptance_damps_every_elastic_mode_of_a_free_free_model():
+    """A free–free chain whose stiffest spring puts its highest mode 1e5 times above its first
+    elastic one (as a Craig–Bampton model's boundary DOFs do): every elastic mode gets ζ, the
+    rigid one none, against the direct solve with C = M Φ diag(2ζω) Φᵀ M. (The rigid modes were
+    those below 1e-4 of the highest frequency: the default model's first two elastic modes, at
+    247 and 540 Hz, were undamped in the report's stuck FRFs until session 24.)"""
+    from fe_joint.model.joint import JointModel
+    from fe_joint.model.reduced_model import modal_damping_matrix
+    from fe_joint.report.linear_frf import StuckReceptance
+    n = 12
+    k = np.full(n - 1, 1e3)
+    k[5] = 1e11
+    K = np.zeros((n, n))
+    for i, ki in enumerate(k):
+        K[i:i + 2, i:i + 2] += ki * np.array([[1.0, -1.0], [-1.0, 1.0]])
+    M = np.eye(n) * 1e-3
+    rm = type("RM", (), dict(K=K, M=M, pair_dofs=np.arange(12).reshape(2, 2, 3),
+                             damping_ratio=2e-3, excitation_dof=0, response_dof=9))()
+    joint = JointModel("j", n0=np.zeros(2), gap=np.zeros(2), kn=np.ones(2), kt=np.ones(2),
+                       area=np.ones(2))                  # nothing loaded: K_s = K
+    w2 = np.linalg.eigvalsh(K / 1e-3)
+    assert np.sqrt(w2[-1] / w2[1]) > 1e4
+    C, _ = modal_damping_matrix(K, M, 2e-3)
+    f = np.sqrt(w2[1:4]) / (2 * np.pi)                  # at the first three elastic modes
+    direct = np.array([np.linalg.solve(K - (2 * np.pi * x) ** 2 * M + 2j * np.pi * x * C, np.eye(n)[0])[9]
+                       for x in f])
+    r = StuckReceptance(rm, joint)
+    assert np.count_nonzero(r.zeta == 0.0) == 1
+    # 1e-4: the 1e8 stiffness contrast costs both solutions digits (they differ by 3.5e-5 of |X|
+    # at the first resonance); an undamped mode would be off by 100 %
+    assert np.allclose(r(f), direct, rtol=1e-4, atol=0)
+
+
+def test_stuck_receptance_of_kept_modes_and_static_residual(monkeypatch):
+    """A model above ALL_MODES_UP_TO DOFs keeps its lowest KEPT_MODES modes and the others'
+    static response: exact at 0 Hz against the free–free-regularized direct solve (the rigid
+    modes' 1/ω² part removed), and off by the discarded modes' dynamic part, (f / f_kept+1)²
+    of them, below the kept modes."""
+    from fe_joint.model.joint import JointModel, stuck_stiffness
+    from fe_joint.model.reduced_model import modal_damping_matrix
+    from fe_joint.report import linear_frf
+    rng = np.random.default_rng(5)
+    n = 16
+    A = rng.normal(size=(n, n))
+    K = A @ A.T + n * np.eye(n)
+    M = np.diag(rng.uniform(1e-3, 2e-3, n))
+    pd = np.arange(12).reshape(2, 2, 3)
+    rm = type("RM", (), dict(K=K, M=M, pair_dofs=pd, damping_ratio=2e-3, excitation_dof=0,
+                             response_dof=5))()
+    joint = JointModel("j", n0=np.array([10.0, 0.0]), gap=np.zeros(2), kn=np.array([3e3, 1e3]),
+                       kt=np.array([2e3, 1e3]), area=np.array([1.0, 2.0]))
+    Ks = stuck_stiffness(K, pd, joint)
+    C, _ = modal_damping_matrix(Ks, M, 2e-3)
+    monkeypatch.setattr(linear_frf, "ALL_MODES_UP_TO", 10)
+    monkeypatch.setattr(linear_frf, "KEPT_MODES", 6)
+    w2 = np.sort(np.linalg.eigvals(np.linalg.solve(M, Ks)).real)
+    f7 = np.sqrt(w2[6]) / (2 * np.pi)
+    f = np.array([0.0, 0.05, 0.1, 0.2]) * f7
+    direct = np.array([np.linalg.solve(Ks - (2 * np.pi * x) ** 2 * M + 2j * np.pi * x * C, np.eye(n)[0])[5]
+                       for x in f])
+    got = linear_frf.StuckReceptance(rm, joint)(f)
+    assert got[0] == pytest.approx(direct[0], rel=1e-10)
+    static = linear_frf.StuckReceptance(rm, joint).static
+    assert static != 0.0
+    for x, g, d in zip(f[1:], got[1:], direct[1:]):
+        assert abs(g - d) <= 2 * (x / f7) ** 2 * abs(static)
+
+
 def test_stuck_receptance_cache_and_parts_from_another_rank(monkeypatch):
     """The receptances are cached by model and springs (the FRF figures ask once per panel); parts
     computed on another rank (``share_eigenproblems``) are served as if computed here; another
@@ -300,7 +368,8 @@ def test_stuck_receptance_cache_and_parts_from_another_rank(monkeypatch):
     first = linear_frf.StuckReceptance(rm, joint(3e3))(f)
     again = linear_frf.StuckReceptance(rm, joint(3e3))(f)
     assert len(calls) == 1 and np.array_equal(first, again)
-    fake = (np.array([4.0, 9.0]), np.array([2.0, 3.0]), np.array([0.0, 0.1]), np.array([1.0, -1.0]))
+    fake = (np.array([4.0, 9.0]), np.array([2.0, 3.0]), np.array([0.0, 0.1]), np.array([1.0, -1.0]),
+            0.0)
     linear_frf.StuckReceptance.from_parts(rm, joint(5e3), fake)
     got = linear_frf.StuckReceptance(rm, joint(5e3))(np.array([0.0]))
     assert len(calls) == 1 and got[0] == pytest.approx(1.0 / 4.0 - 1.0 / 9.0)
