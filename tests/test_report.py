@@ -180,6 +180,18 @@ def test_figures_shared_by_two_ranks_are_the_figures_of_one(report, tmp_path):
     assert sorted(p.name for p in (tmp_path / "two").iterdir()) == sorted(p.name for p in one)
 
 
+def test_figure_ranks_deal_every_figure_once_and_fewer_to_rank_0():
+    """On 2 ranks rank 0 draws one figure in RANK0_CYCLE (it writes the summary too); on 3 each
+    other rank draws RANK0_CYCLE - 1 times as many as rank 0; one rank draws all."""
+    from fe_joint.report.figures import RANK0_CYCLE, figure_ranks
+    two = figure_ranks(16, 2)
+    assert two.count(0) == 16 // RANK0_CYCLE and two.count(1) == 16 - 16 // RANK0_CYCLE
+    cycle = 1 + 2 * (RANK0_CYCLE - 1)
+    three = figure_ranks(3 * cycle, 3)
+    assert [three.count(r) for r in range(3)] == [3, 3 * (RANK0_CYCLE - 1), 3 * (RANK0_CYCLE - 1)]
+    assert figure_ranks(5, 1) == [0] * 5
+
+
 def test_k_eq_against_hand_sums(report):
     _, w, s = report
     sv, k_ref = w["surfaces"][5.0], CASE["contact"]["k_ref"]

@@ -129,7 +129,9 @@ def share_eigenproblems(data, comm) -> None:
     from ..study.queue import map_ranks
     from .stiffness import configuration_joints
     rm, joints = data.rm, configuration_joints(data)
-    items = [(kind, name) for name in joints for kind in ("receptance", "modes")]
+    # the receptances first, then the cheaper modes: dealt round-robin, so that each rank gets
+    # about as much work (interleaved, rank 0 drew every receptance and rank 1 every mode set)
+    items = [(kind, name) for kind in ("receptance", "modes") for name in joints]
 
     def one(item):
         kind, name = item
