@@ -254,6 +254,13 @@ FLOOR_STALL_ITERATIONS = 3
 #: output amplitudes, follow the smooth-ms forced peak): nine failed runs at 1e-6 … 1e-7, 20-30 s
 #: each, made its backbone take 386 s instead of 151 s.
 KINK_STALLS = 2
+#: A failed Newton run at an output amplitude whose last converged point (reached by halved
+#: steps towards it) lies within this fraction of the output step below it (in log amplitude,
+#: three halvings): that point is the output point instead. A kink of the sampled friction law at
+#: the output amplitude itself made Newton fail there again and again: the default model's stiff
+#: layer joint met one at 0.0233 in every run (its output amplitudes follow the smooth-ms forced
+#: peak), 4-8 failed runs of up to 20 GMRES-heavy iterations, 13-22 of its 49-78 s (session 24).
+NEAR_OUTPUT = 0.125
 
 
 class NonlinearModeProblem:
@@ -581,11 +588,12 @@ def _continue(hb, mode: int, a0: float, a1: float, dof: int, n_points: int, tol,
     U, w, xi, res, it, g, nl = prob.solve(a0, U, w, xi)
     hist = [(a0, U / a0, w, xi)]
     rows = [(a0, U, w, xi, g, res, it)]
-    stop, skipped = "", []
+    stop, skipped, moved = "", [], []
     i = 1
     while i < targets.size and not stop:
         at = targets[i]
         halvings, jump, stalls = 0, False, 0
+        near = None         # the last point converged on the way to ``at`` (halved steps)
         while not stop:
             ac, Uc, wc, xc = hist[-1]
             a_try = ac * (at / ac) ** (0.5 ** halvings)
@@ -603,6 +611,10 @@ def _continue(hb, mode: int, a0: float, a1: float, dof: int, n_points: int, tol,
             try:
                 U, w, xi, res, it, g, nl = prob.solve(a_try, *guess)
             except ConvergenceError as err:
+                if (a_try == at and near is not None
+                        and np.log(at / near[0]) <= (NEAR_OUTPUT + 1e-9) * np.log(at / rows[-1][0])):
+                    moved.append((float(at), float(near[0])))
+                    break           # ``near`` is this output's point (NEAR_OUTPUT)
                 halvings += 1
                 stalls = stalls + 1 if err.residual <= STALL_BELOW else 0
                 if ((halvings > max_halvings or stalls >= KINK_STALLS) and not jump
@@ -611,7 +623,7 @@ def _continue(hb, mode: int, a0: float, a1: float, dof: int, n_points: int, tol,
                     # whole step from here to the next one (the stiff layer joint of the default
                     # model stalled at 1e-7 … 1e-6 from 0.02285 to 0.0233 and converged beyond)
                     skipped.append((float(at), float(err.residual)))
-                    i, halvings, jump, stalls = i + 1, 0, True, 0
+                    i, halvings, jump, stalls, near = i + 1, 0, True, 0, None
                     at = targets[i]
                     continue
                 if halvings > max_halvings or jump:
@@ -624,13 +636,18 @@ def _continue(hb, mode: int, a0: float, a1: float, dof: int, n_points: int, tol,
                 continue
             hist = hist[-1:] + [(a_try, U / a_try, w, xi)]
             if a_try == at:
+                near = None
                 break
+            near = (a_try, U, w, xi, g, res, it)
             halvings, stalls = max(halvings - 1, 0), 0
         if not stop:
-            rows.append((at, U, w, xi, g, res, it))
+            rows.append(near if near is not None else (at, U, w, xi, g, res, it))
             i += 1
     reason = stop or ("skipped modal amplitude " + ", ".join(
         f"{a:.6g} (residual reached: {r:.3g})" for a, r in skipped) if skipped else "")
+    if moved and not stop:
+        reason = "; ".join(x for x in (reason, "moved modal amplitude " + ", ".join(
+            f"{a:.6g} to {b:.6g}" for a, b in moved)) if x)
     pts = [prob.point(a, U, w, xi, g, int(dof)) for a, U, w, xi, g, _, _ in rows]
     col = {k: np.array([p[k] for p in pts]) for k in pts[0]}
     om = np.array([r[2] for r in rows])

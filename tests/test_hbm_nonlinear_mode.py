@@ -468,6 +468,36 @@ def test_backbone_steps_over_a_kink_after_two_stalls(monkeypatch):
         assert len(failed) == 1 + fails and bb.modal_amplitude.size == full.modal_amplitude.size - 1
 
 
+def test_backbone_moves_an_output_amplitude_off_a_kink(monkeypatch):
+    """Newton failing at one output amplitude only (a kink of the sampled friction law right
+    there): after the halved steps have come within NEAR_OUTPUT of the output step (three
+    halvings), the last point reached is that output's point, named in stop_reason; the others
+    are the full backbone's amplitudes, and every point lies on the H = 1 describing-function
+    backbone."""
+    from hbm import nonlinear_mode as nm
+    from hbm.errors import ConvergenceError
+    hb = jenkins_1dof(1, 4096)
+    full = hb.nonlinear_mode(0, (0.05, 5.0), dof=0, n_points=12)
+    bad, prev = full.modal_amplitude[6], full.modal_amplitude[5]
+    solve, calls = NonlinearModeProblem.solve, []
+
+    def kink(self, a, *args, **kw):
+        if a == bad:
+            calls.append(a)
+            raise ConvergenceError("test: a kink at the output amplitude", 3e-5)
+        return solve(self, a, *args, **kw)
+    monkeypatch.setattr(NonlinearModeProblem, "solve", kink)
+    bb = hb.nonlinear_mode(0, (0.05, 5.0), dof=0, n_points=12)
+    moved = bad * (prev / bad) ** nm.NEAR_OUTPUT
+    assert bb.complete and f"moved modal amplitude {bad:.6g} to {moved:.6g}" in bb.stop_reason
+    assert len(calls) == 4                  # the whole step, then one after each halving
+    keep = np.arange(full.modal_amplitude.size) != 6
+    assert np.array_equal(bb.modal_amplitude[keep], full.modal_amplitude[keep])
+    assert bb.modal_amplitude[6] == pytest.approx(moved, rel=1e-12)
+    w, _, zeta, _ = jenkins_backbone_h1(bb.displacement_amplitude, M1, K1, C1, KT, FS)
+    assert np.max(np.abs(bb.omega / w - 1)) <= 1e-6 and np.max(np.abs(bb.zeta / zeta - 1)) <= 1e-6
+
+
 def test_gmres_path_backbone_is_one_bordered_solve_per_step(monkeypatch):
     """On the GMRES path each EPMC Newton step is one GMRES run on the system bordered by the
     frequency and the damping (``HarmonicBalance.linsolve_bordered``) instead of three: the
