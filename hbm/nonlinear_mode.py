@@ -260,7 +260,11 @@ KINK_STALLS = 2
 #: the output amplitude itself made Newton fail there again and again: the default model's stiff
 #: layer joint met one at 0.0233 in every run (its output amplitudes follow the smooth-ms forced
 #: peak), 4-8 failed runs of up to 20 GMRES-heavy iterations, 13-22 of its 49-78 s (session 24).
+#: Only a Newton run that failed near convergence counts (residual <= NEAR_OUTPUT_RESIDUAL; at
+#: that kink 1.1e-5 ... 2.3e-4), not a friction march that did not close (CycleNotClosed):
+#: that one is not the amplitude's doing, and a retry from nearer gets there.
 NEAR_OUTPUT = 0.125
+NEAR_OUTPUT_RESIDUAL = 1e-3
 
 
 class NonlinearModeProblem:
@@ -611,7 +615,8 @@ def _continue(hb, mode: int, a0: float, a1: float, dof: int, n_points: int, tol,
             try:
                 U, w, xi, res, it, g, nl = prob.solve(a_try, *guess)
             except ConvergenceError as err:
-                if (a_try == at and near is not None
+                if (a_try == at and near is not None and not isinstance(err, CycleNotClosed)
+                        and err.residual <= NEAR_OUTPUT_RESIDUAL
                         and np.log(at / near[0]) <= (NEAR_OUTPUT + 1e-9) * np.log(at / rows[-1][0])):
                     moved.append((float(at), float(near[0])))
                     break           # ``near`` is this output's point (NEAR_OUTPUT)

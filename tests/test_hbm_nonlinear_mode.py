@@ -469,11 +469,12 @@ def test_backbone_steps_over_a_kink_after_two_stalls(monkeypatch):
 
 
 def test_backbone_moves_an_output_amplitude_off_a_kink(monkeypatch):
-    """Newton failing at one output amplitude only (a kink of the sampled friction law right
-    there): after the halved steps have come within NEAR_OUTPUT of the output step (three
-    halvings), the last point reached is that output's point, named in stop_reason; the others
-    are the full backbone's amplitudes, and every point lies on the H = 1 describing-function
-    backbone."""
+    """Newton failing near convergence at one output amplitude only (a kink of the sampled
+    friction law right there): after the halved steps have come within NEAR_OUTPUT of the output
+    step (three halvings), the last point reached is that output's point, named in stop_reason;
+    the others are the full backbone's amplitudes, and every point lies on the H = 1
+    describing-function backbone. (A friction march that does not close there moves nothing:
+    test_hbm_continuation's flaky contacts.)"""
     from hbm import nonlinear_mode as nm
     from hbm.errors import ConvergenceError
     hb = jenkins_1dof(1, 4096)

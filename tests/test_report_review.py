@@ -251,14 +251,12 @@ def test_report_links_the_xdmf_files(run):
 
 # --- stuck FRF and figures -------------------------------------------------------------------------
 
-def test_stuck_receptance_against_a_direct_solve():
-    """Modal superposition against (K_s − ω²M + iωC)⁻¹ with C = M Φ diag(2ζω) Φᵀ M of the stuck
-    structure, solved directly on a small two-body model with two pairs."""
+def _two_pair_model(seed: int, n: int):
+    """A random SPD model of n DOFs with two pairs (DOFs 0-11), one loaded: (rm-like, joint,
+    stuck K_s, its modal damping C with ζ = 2e-3)."""
     from fe_joint.model.joint import JointModel, stuck_stiffness
     from fe_joint.model.reduced_model import modal_damping_matrix
-    from fe_joint.report.linear_frf import stuck_receptance
-    rng = np.random.default_rng(3)
-    n = 12
+    rng = np.random.default_rng(seed)
     A = rng.normal(size=(n, n))
     K = A @ A.T + n * np.eye(n)
     M = np.diag(rng.uniform(1e-3, 2e-3, n))
@@ -268,7 +266,16 @@ def test_stuck_receptance_against_a_direct_solve():
     joint = JointModel("j", n0=np.array([10.0, 0.0]), gap=np.zeros(2), kn=np.array([3e3, 1e3]),
                        kt=np.array([2e3, 1e3]), area=np.array([1.0, 2.0]))
     Ks = stuck_stiffness(K, pd, joint)
-    C, _ = modal_damping_matrix(Ks, M, 2e-3)
+    return rm, joint, Ks, modal_damping_matrix(Ks, M, 2e-3)[0]
+
+
+def test_stuck_receptance_against_a_direct_solve():
+    """Modal superposition against (K_s − ω²M + iωC)⁻¹ with C = M Φ diag(2ζω) Φᵀ M of the stuck
+    structure, solved directly on a small two-body model with two pairs."""
+    from fe_joint.report.linear_frf import stuck_receptance
+    n = 12
+    rm, joint, Ks, C = _two_pair_model(3, n)
+    M = rm.M
     f = np.linspace(50, 400, 7)
     direct = np.array([np.linalg.solve(Ks - (2 * np.pi * x) ** 2 * M + 2j * np.pi * x * C, np.eye(n)[0])[5]
                        for x in f])
@@ -310,24 +317,12 @@ def test_stuck_receptance_damps_every_elastic_mode_of_a_free_free_model():
 
 def test_stuck_receptance_of_kept_modes_and_static_residual(monkeypatch):
     """A model above ALL_MODES_UP_TO DOFs keeps its lowest KEPT_MODES modes and the others'
-    static response: exact at 0 Hz against the free–free-regularized direct solve (the rigid
-    modes' 1/ω² part removed), and off by the discarded modes' dynamic part, (f / f_kept+1)²
-    of them, below the kept modes."""
-    from fe_joint.model.joint import JointModel, stuck_stiffness
-    from fe_joint.model.reduced_model import modal_damping_matrix
+    static response: exact at 0 Hz against the direct solve, and off by the discarded modes'
+    dynamic part, (f / f_kept+1)² of them, below the kept modes."""
     from fe_joint.report import linear_frf
-    rng = np.random.default_rng(5)
     n = 16
-    A = rng.normal(size=(n, n))
-    K = A @ A.T + n * np.eye(n)
-    M = np.diag(rng.uniform(1e-3, 2e-3, n))
-    pd = np.arange(12).reshape(2, 2, 3)
-    rm = type("RM", (), dict(K=K, M=M, pair_dofs=pd, damping_ratio=2e-3, excitation_dof=0,
-                             response_dof=5))()
-    joint = JointModel("j", n0=np.array([10.0, 0.0]), gap=np.zeros(2), kn=np.array([3e3, 1e3]),
-                       kt=np.array([2e3, 1e3]), area=np.array([1.0, 2.0]))
-    Ks = stuck_stiffness(K, pd, joint)
-    C, _ = modal_damping_matrix(Ks, M, 2e-3)
+    rm, joint, Ks, C = _two_pair_model(5, n)
+    M = rm.M
     monkeypatch.setattr(linear_frf, "ALL_MODES_UP_TO", 10)
     monkeypatch.setattr(linear_frf, "KEPT_MODES", 6)
     w2 = np.sort(np.linalg.eigvals(np.linalg.solve(M, Ks)).real)
