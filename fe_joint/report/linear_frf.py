@@ -11,9 +11,9 @@ over every mode of a model of up to ``ALL_MODES_UP_TO`` DOFs (S = 0), else over 
 ``KEPT_MODES`` (the HBM receptance's, ``hbm.LinearStructure``) with the static response of the
 others, S = [K_s⁻¹ − Σ_kept φ φᵀ / ω_r²]_(resp, exc) (rigid modes removed as in ``hbm.structure``).
 What S leaves out, the dynamic amplification and damping of the modes above the kept ones, is
-(f / f_kept)² ≈ 1e-3 of S at the resonator's 250 Hz: below what a figure shows. One subset eigh
-and one Cholesky: 1.0 s against 2.1 s for the full eigh at the default model's 2198 DOFs
-(issue 16, session 24).
+(f / f_kept)² of S, below what a figure shows: on the default model within 2.6e-5 of the full
+superposition over 200–260 Hz (median 8.5e-7). One subset eigh and one Cholesky: 1.2 s against
+2.3 s for the full eigh at 2198 DOFs (issue 16, session 24).
 """
 from __future__ import annotations
 
@@ -117,7 +117,7 @@ def stuck_receptance(rm, joint: JointModel, freq_hz: np.ndarray) -> np.ndarray:
 
 def share_eigenproblems(data, comm) -> None:
     """The report's costliest eigenproblems, dealt to the ranks before rank 0 writes the report:
-    each configuration joint's stuck receptance (a subset eigh and a Cholesky, 1.0 s at the
+    each configuration joint's stuck receptance (a subset eigh and a Cholesky, 1.2 s at the
     default model's 2198 DOFs) and its ten stuck modes (0.3 s). The results are cached on every
     rank, so rank 0's figures and tables find them; they are the same bits as rank 0's own
     (the same computation on the same inputs, one BLAS thread). Collective.
