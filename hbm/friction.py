@@ -405,6 +405,9 @@ class _StepTables:
     def __init__(self, u, kt, mu, kn, n0, gap) -> None:
         k, _, nt = u.shape
         self.kt, self.mu, self.kn = kt, mu, kn
+        if USE_JIT and friction_jit.AVAILABLE:
+            self._compiled(u, n0, gap)
+            return
         self.ut = u[:, 0] + 1j * u[:, 1]
         nraw = n0[:, None] + kn[:, None] * (u[:, 2] - gap[:, None])
         self.N = np.maximum(0.0, nraw)
@@ -428,6 +431,22 @@ class _StepTables:
         self.Lpe = mu[:, None] * _dpoly(n, 1.0)
         self.scale = np.maximum((mu[:, None] * self.N).max(axis=1), 1e-300) / kt
         self.det = (self.al * self.al.conj()).real - (self.be * self.be.conj()).real
+
+    def _compiled(self, u, n0, gap) -> None:
+        """The same arrays by :func:`hbm.friction_jit.step_tables` (to rounding: tested)."""
+        k, _, nt = u.shape
+        c, r = np.empty((k, nt), dtype=complex), np.empty((k, nt))
+        self.ut, self.al, self.be, self.pe = c, c.copy(), c.copy(), c.copy()
+        self.N, self.L, self.tlo, self.Lpe, self.det = r, r.copy(), r.copy(), r.copy(), r.copy()
+        self.closed, self.tcl, self.bad = (np.empty((k, nt), dtype=bool) for _ in range(3))
+        self.ct, self.Nc, self.Lc = np.empty((k, nt, 4), dtype=complex), np.empty((k, nt, 4)), np.empty((k, nt, 4))
+        self.pg, self.Lg = np.empty((k, nt, 2), dtype=complex), np.empty((k, nt, 2))
+        self.scale = np.empty(k)
+        friction_jit.step_tables(np.asarray(u, float), np.asarray(self.kt, float), np.asarray(self.mu, float),
+                                 np.asarray(self.kn, float), np.asarray(n0, float), np.asarray(gap, float),
+                                 self.ut, self.N, self.closed, self.tcl, self.L, self.ct, self.Nc,
+                                 self.Lc, self.pg, self.Lg, self.bad, self.tlo, self.al, self.be,
+                                 self.pe, self.Lpe, self.scale, self.det)
 
     def packed(self) -> np.ndarray:
         """What a round of _advance reads, (k, nt, 6), packed so that one gather serves it."""
@@ -892,7 +911,14 @@ def _cycle_matrix(tab: _StepTables, rows, rec: _Record) -> np.ndarray:
     _switch_steps; full-step slips: dw_j = (L_j / (2 |T0|)) K (dw - z0^2 conj dw), K the Möbius
     derivative), unless the march accumulated it."""
     todo = np.nonzero(~rec.cdone)[0]
-    if todo.size:
+    if todo.size and USE_JIT and friction_jit.AVAILABLE:
+        cP, cQ = np.empty(todo.size, dtype=complex), np.empty(todo.size, dtype=complex)
+        friction_jit.cycle_matrix(np.asarray(rows)[todo], tab.kt, tab.ut, tab.L, tab.al, tab.be,
+                                  tab.det, rec.code[todo], rec.wst[todo], rec.AP[todo],
+                                  rec.AQ[todo], cP, cQ)
+        rec.cP[todo], rec.cQ[todo] = cP, cQ
+        rec.cdone[todo] = True
+    elif todo.size:
         code = rec.code[todo]
         P = np.where(code == STICK_STEP, 1.0 + 0j, np.where(code == EVENT_STEP, rec.AP[todo], 0j))
         Q = np.where(code == EVENT_STEP, rec.AQ[todo], 0j)
@@ -1451,12 +1477,19 @@ class FrictionContacts:
             dN (k, nt, 3 nH) in the element's (direction, harmonic) layout.
         """
         out, jac = self._march(u, idx, fourier, jacobian, newton, max_cycles)
-        return out + list(jac()) if jacobian else out
+        if not jacobian:
+            return out
+        dT, wN = jac()
+        k, nt = wN.shape
+        dN = np.zeros((k, nt, 3, fourier.nH))
+        dN[:, :, 2] = wN[..., None] * fourier.E[None]
+        return out + [dT, dN.reshape(k, nt, -1)]
 
     def _march(self, u: np.ndarray, idx: np.ndarray, fourier: Fourier | None, jacobian: bool,
                newton: bool = True, max_cycles: int | None = None):
         """:meth:`march` with its Jacobian deferred: (the forward results, a function that
-        returns (dT, dN) on its first call and the same arrays after; None without jacobian).
+        returns (dT, wN) (:func:`_march_jacobian`) on its first call and the same arrays after;
+        None without jacobian).
         A Newton line search rejects most of its trials: their Jacobians are never needed."""
         tab = _StepTables(u, self.kt[idx], self.mu[idx], self.kn[idx], self.n0[idx], self.gap[idx])
         n_cycles = self.max_cycles if max_cycles is None else int(max_cycles)
@@ -1499,10 +1532,10 @@ class FrictionContacts:
             return out, None
 
         def jac():
-            dT, dN = _march_jacobian(tab, final, hist() if callable(hist) else hist, cyc, fourier)
+            dT, wN = _march_jacobian(tab, final, hist() if callable(hist) else hist, cyc, fourier)
             if sub_jac is not None:
-                dT[redo], dN[redo] = sub_jac()
-            return dT, dN
+                dT[redo], wN[redo] = sub_jac()
+            return dT, wN
         return out, once(jac)
 
     def _repeat(self, tab: _StepTables, fourier: Fourier | None, jacobian: bool, max_cycles: int):
@@ -1679,12 +1712,14 @@ class FrictionContacts:
                 blk[sh, nH] -= self.kt[e, None] * dw[:, 1]
             DF[pos[sx]] = blk
         if marched.size:
-            dT, dN = jac()
+            dT, wN = jac()
             D = fourier.D
             blk = np.empty((marched.size, 3 * nH, 3 * nH))
             blk[:, 0:nH] = D @ dT[:, 0]
             blk[:, nH:2 * nH] = D @ dT[:, 1]
-            blk[:, 2 * nH:] = D @ dN
+            # N depends on u_n alone, sample by sample
+            blk[:, 2 * nH:, :2 * nH] = 0.0
+            blk[:, 2 * nH:, 2 * nH:] = D @ (wN[:, :, None] * fourier.E[None])
             DF[pos[marched]] = blk
         return DF
 
@@ -1772,6 +1807,11 @@ def _march_jacobian(tab: _StepTables, final: _Record, hist, cyc, fourier: Fourie
     ``hist`` is the march's history (``_forward``), or that propagation already done for every
     element, (k, 2, 3 nH) (``_repeat``).
     Compiled (hbm.friction_jit) when the march is, else in numpy.
+
+    Returns:
+        dT (k, 2, nt, 3 nH) and wN (k, nt): dN_j = wN_j du_n,j (k_n where closed), kept as
+        weights: the full (k, nt, 3 nH) dN, two thirds zeros, cost 4 ms per Jacobian on the
+        resonator to build and multiply.
     """
     k, nt = final.code.shape
     nH, E = fourier.nH, fourier.E
@@ -1796,18 +1836,17 @@ def _march_jacobian(tab: _StepTables, final: _Record, hist, cyc, fourier: Fourie
     if neutral.size:
         dw0[neutral] = (hist[neutral] if isinstance(hist, np.ndarray)
                         else _neutral_history(tab, hist, cyc, neutral, E))
-    dN = np.zeros((k, nt, 3, nH))
-    dN[:, :, 2] = (tab.kn[:, None] * tab.closed)[..., None] * E[None]
+    wN = tab.kn[:, None] * tab.closed
     if jit:
         friction_jit.force_sensitivities(tab.kt, Ps, dw0, E, Ds)         # dT, in place of Ds
-        return Ds, dN.reshape(k, nt, nx)
+        return Ds, wN
     # dw after step j = after the active steps up to and including j
     which = np.searchsorted(active, np.arange(nt), side="right")
     dws = Ps[:, which] @ dw0[:, None] + Ds[:, which]                     # (k, nt, 2, nx)
     Et = np.zeros((nt, 2, nx))
     Et[:, 0, 0:nH], Et[:, 1, nH:2 * nH] = E, E
     dT = (tab.kt[:, None, None, None] * (Et[None] - dws)).transpose(0, 2, 1, 3)
-    return dT, dN.reshape(k, nt, nx)
+    return dT, wN
 
 
 def _jit_jacobian() -> bool:

@@ -970,3 +970,171 @@ def force_sensitivities(kt: np.ndarray, Ps: np.ndarray, dw0: np.ndarray, E: np.n
                     dw = Ps[i, j, r, 0] * dw0[i, 0, x] + Ps[i, j, r, 1] * dw0[i, 1, x] + Ds[i, r, j, x]
                     ex = E[j, x - r * nH] if r * nH <= x < (r + 1) * nH else 0.0
                     Ds[i, r, j, x] = kt[i] * (ex - dw)
+
+
+# ============================================================================ step tables
+@njit(cache=True, error_model="numpy")
+def _sinc_r(r: float) -> float:
+    """sin r / r as friction._cs_array computes it (numpy's sinc of r / pi: the same bits)."""
+    y = math.pi * (r / math.pi if r != 0.0 else 1.0e-20)
+    return math.sin(y) / y
+
+
+@njit(cache=True, error_model="numpy")
+def step_tables(u, kt, mu, kn, n0, gap, ut, N, closed, tcl, L, ct, Nc, Lc, pg, Lg, bad, tlo, al,
+                be, pe, Lpe, scale, det):
+    """friction._StepTables' arrays for elements' samples u (k, 3, nt), filled in place (the
+    attributes of the same names; the numpy constructor's formulas, one element and step at a
+    time: its ~40 array operations over (k, nt, 4) cost 5.7 ms per residual on the resonator's
+    top level, 7 % of a curve). The same numbers but for numpy's own tanh and cos (a few ulps
+    in al, be, det)."""
+    k, nt = ut.shape
+    nraw = np.empty(nt)
+    for e in range(k):
+        m, kte = mu[e], kt[e]
+        peak = 0.0
+        for j in range(nt):
+            ut[e, j] = complex(u[e, 0, j], u[e, 1, j])
+            x = n0[e] + kn[e] * (u[e, 2, j] - gap[e])
+            nraw[j] = x
+            N[e, j] = max(0.0, x)
+            closed[e, j] = x > 0.0
+            tcl[e, j] = x > 0.0 and m > 0.0
+            L[e, j] = m * N[e, j] if tcl[e, j] else 0.0
+            peak = max(peak, m * N[e, j])
+        scale[e] = max(peak, 1e-300) / kte
+        for j in range(nt):
+            cr0 = cr1 = cr2 = cr3 = 0.0
+            ci0 = ci1 = ci2 = ci3 = 0.0
+            n_0 = n_1 = n_2 = n_3 = 0.0
+            for i in range(4):
+                q = j + i - 2
+                if q < 0:
+                    q += nt
+                elif q >= nt:
+                    q -= nt
+                xr, xi, xn = u[e, 0, q], u[e, 1, q], nraw[q]
+                v0, v1, v2, v3 = VINV[0, i], VINV[1, i], VINV[2, i], VINV[3, i]
+                cr0 += xr * v0
+                cr1 += xr * v1
+                cr2 += xr * v2
+                cr3 += xr * v3
+                ci0 += xi * v0
+                ci1 += xi * v1
+                ci2 += xi * v2
+                ci3 += xi * v3
+                n_0 += xn * v0
+                n_1 += xn * v1
+                n_2 += xn * v2
+                n_3 += xn * v3
+            c0, c1 = complex(cr0, ci0), complex(cr1, ci1)
+            c2, c3 = complex(cr2, ci2), complex(cr3, ci3)
+            ct[e, j, 0], ct[e, j, 1], ct[e, j, 2], ct[e, j, 3] = c0, c1, c2, c3
+            Nc[e, j, 0], Nc[e, j, 1], Nc[e, j, 2], Nc[e, j, 3] = n_0, n_1, n_2, n_3
+            Lc[e, j, 0], Lc[e, j, 1], Lc[e, j, 2], Lc[e, j, 3] = m * n_0, m * n_1, m * n_2, m * n_3
+            ng0 = n_0 + GAUSS0 * (n_1 + GAUSS0 * (n_2 + GAUSS0 * n_3))
+            ng1 = n_0 + GAUSS1 * (n_1 + GAUSS1 * (n_2 + GAUSS1 * n_3))
+            p0 = c1 + GAUSS0 * (2.0 * c2 + GAUSS0 * (3.0 * c3))
+            p1 = c1 + GAUSS1 * (2.0 * c2 + GAUSS1 * (3.0 * c3))
+            pg[e, j, 0], pg[e, j, 1] = p0, p1
+            lg0, lg1 = m * ng0, m * ng1
+            Lg[e, j, 0], Lg[e, j, 1] = lg0, lg1
+            b = tcl[e, j - 1 if j > 0 else nt - 1] and tcl[e, j] and (ng0 <= 0.0 or ng1 <= 0.0)
+            bad[e, j] = b
+            tlo[e, j] = (GAUSS1 if ng1 <= 0.0 else GAUSS0) if b else 0.0
+            if not (lg0 > 0.0 and lg1 > 0.0):
+                lg0, lg1 = 1.0, 1.0
+            # numpy divides a complex by a real as (x + 0 i) / (2 lg): times 1 / (2 lg)
+            s0, s1 = 1.0 / (2.0 * lg0), 1.0 / (2.0 * lg1)
+            a0 = complex(kte * p0.real * s0, kte * p0.imag * s0)
+            a1 = complex(kte * p1.real * s1, kte * p1.imag * s1)
+            A = 0.5 * (a0 + a1)
+            gam = S6 * (a1 * a0.conjugate()).imag
+            x = (A * A.conjugate()).real - gam * gam
+            r = math.sqrt(abs(x))
+            if x >= 0.0:
+                cc = 1.0
+                ss = 1.0 + x * (-1.0 / 3.0 + x * (2.0 / 15.0)) if r < 1e-2 else math.tanh(r) / r
+            else:
+                cc = math.cos(r)
+                ss = _sinc_r(r)
+            a = complex(cc, ss * gam)
+            bb = ss * A
+            al[e, j], be[e, j] = a, bb
+            det[e, j] = (a * a.conjugate()).real - (bb * bb.conjugate()).real
+            pe[e, j] = c1 + 1.0 * (2.0 * c2 + 1.0 * (3.0 * c3))
+            Lpe[e, j] = m * (n_1 + 1.0 * (2.0 * n_2 + 1.0 * (3.0 * n_3)))
+
+
+# ============================================================================ period's map
+@njit(cache=True, error_model="numpy")
+def _cm(a, b):
+    """friction._cmul: a b with each real operation rounded on its own."""
+    return complex(a.real * b.real - a.imag * b.imag, a.real * b.imag + a.imag * b.real)
+
+
+@njit(cache=True, error_model="numpy")
+def _real_over(x, b):
+    """x / b for real x and complex b as numpy divides (x + 0 i) / b (Smith's method with the
+    reciprocal of the denominator)."""
+    br, bi = b.real, b.imag
+    if abs(br) >= abs(bi):
+        if br == 0.0 and bi == 0.0:
+            return complex(x / abs(br), 0.0 / abs(br))
+        rat = bi / br
+        scl = 1.0 / (br + bi * rat)
+        return complex((x + 0.0 * rat) * scl, (0.0 - x * rat) * scl)
+    rat = br / bi
+    scl = 1.0 / (bi + br * rat)
+    return complex((x * rat + 0.0) * scl, (0.0 * rat - x) * scl)
+
+
+@njit(cache=True, error_model="numpy")
+def _times_real(x, c):
+    """x c for real x and complex c as numpy multiplies (x + 0 i) c."""
+    return complex(x * c.real - 0.0 * c.imag, x * c.imag + 0.0 * c.real)
+
+
+@njit(cache=True, error_model="numpy")
+def cycle_matrix(g, kt, ut, L, al, be, det, code, wst, AP, AQ, cP, cQ):
+    """friction._cycle_matrix's (cP, cQ) of records (code, wst, AP, AQ; rows i) of the step-table
+    elements g[i]: each step's map dv -> P dv + Q conj(dv) composed over the period by the same
+    pairwise tree as friction._compose, in the same operations (the same bits: tested)."""
+    nt = ut.shape[1]
+    P = np.empty(nt + 1, dtype=np.complex128)
+    Q = np.empty(nt + 1, dtype=np.complex128)
+    for i in range(g.size):
+        e = g[i]
+        for j in range(nt):
+            c = code[i, j]
+            if c == STICK_STEP:
+                P[j], Q[j] = 1.0 + 0.0j, 0.0j
+            elif c == EVENT_STEP:
+                P[j], Q[j] = AP[i, j], AQ[i, j]
+            elif c == SLIP_STEP:
+                d = ut[e, j - 1 if j > 0 else nt - 1] - wst[i, j]
+                T0 = _times_real(kt[e], d)
+                r0 = abs(T0)
+                if r0 == 0.0:
+                    z0 = complex(T0.real / r0, T0.imag / r0)
+                else:
+                    s = 1.0 / r0
+                    z0 = complex((T0.real + T0.imag * 0.0) * s, (T0.imag - T0.real * 0.0) * s)
+                b, a = be[e, j], al[e, j]
+                den = _cm(b.conjugate(), z0) + a.conjugate()
+                K = _real_over(det[e, j], _cm(den, den))
+                p = _times_real(L[e, j] / (2.0 * r0), K)
+                P[j], Q[j] = p, -_cm(p, _cm(z0, z0))
+            else:
+                P[j], Q[j] = 0.0j, 0.0j
+        n = nt
+        while n > 1:
+            if n % 2:
+                P[n], Q[n] = 1.0 + 0.0j, 0.0j
+                n += 1
+            for m in range(n // 2):
+                p1, q1, p2, q2 = P[2 * m], Q[2 * m], P[2 * m + 1], Q[2 * m + 1]
+                P[m] = _cm(p2, p1) + _cm(q2, q1.conjugate())
+                Q[m] = _cm(p2, q1) + _cm(q2, p1.conjugate())
+            n //= 2
+        cP[i], cQ[i] = P[0], Q[0]

@@ -198,6 +198,59 @@ def test_jacobian_through_switch_chains_and_reclosings(case, path, monkeypatch):
     assert np.all((e2 <= 0.01 * e1) | (e2 <= 1e-5 * scale))
 
 
+def tables_both_ways(u, kt, mu, kn, n0, gap, monkeypatch):
+    """_StepTables by the numpy constructor and by friction_jit.step_tables."""
+    monkeypatch.setattr(friction, "USE_JIT", False)
+    a = friction._StepTables(u, kt, mu, kn, n0, gap)
+    monkeypatch.setattr(friction, "USE_JIT", True)
+    return a, friction._StepTables(u, kt, mu, kn, n0, gap)
+
+
+def test_compiled_step_tables_equal_the_numpy_ones(monkeypatch):
+    """The compiled step tables are the numpy constructor's (the formulas in the same order):
+    bit for bit but for al, be and det, where numpy's own tanh and cos differ from the C
+    library's by an ulp. Elements: separating ellipses, reclosings inside a step (bad steps),
+    one without friction."""
+    use_path("jit", monkeypatch)
+    f = Fourier(3, 7)
+    u = np.concatenate([f.to_time(reclosing(f)), Fourier(3, 7).to_time(switch_chains(5))])
+    k = len(u)
+    kt, kn = np.linspace(80.0, 120.0, k), np.linspace(900.0, 1100.0, k)
+    mu, n0, gap = np.full(k, MU), np.full(k, N0), np.zeros(k)
+    mu[-1] = 0.0
+    a, b = tables_both_ways(u, kt, mu, kn, n0, gap, monkeypatch)
+    assert a.bad.any() and not a.tcl[-1].any() and a.closed[-1].any()
+    assert set(vars(a)) == set(vars(b))
+    for name, x in vars(a).items():
+        y = getattr(b, name)
+        assert x.shape == y.shape and x.dtype == y.dtype, name
+        if name in ("al", "be", "det"):
+            assert np.abs(x - y).max() <= 1e-14 * np.abs(x).max(), name      # measured 1.4e-15
+        else:
+            assert np.array_equal(x, y), name
+
+
+def test_compiled_period_map_equals_the_numpy_one(monkeypatch):
+    """friction_jit.cycle_matrix against friction._cycle_matrix's numpy composition, on the
+    closing periods of the switch chains under a larger preload (stick, slip, open and switching
+    steps; the elements that open have a zero map): to rounding (numpy's complex abs is not the C
+    library's hypot)."""
+    use_path("jit", monkeypatch)
+    f = Fourier(3, 16)
+    tab, rec = marched(contacts(12, n0=3 * N0), switch_chains(), f)
+    rows = np.arange(len(rec.code))
+    assert {0, 1, 2, 3} <= set(np.unique(rec.code))
+    maps = []
+    for jit in (False, True):
+        monkeypatch.setattr(friction, "USE_JIT", jit)
+        r = rec.take(rows)
+        r.cdone[:] = False
+        maps.append(friction._cycle_matrix(tab, rows, r))
+    scale = np.abs(maps[0]).max(axis=(1, 2))          # per element: the maps contract a lot
+    assert np.all(np.abs(maps[0] - maps[1]).max(axis=(1, 2)) <= 1e-13 * scale)   # 1.5e-15
+    assert np.count_nonzero(scale) >= 3
+
+
 def compiled_step_jacobians(tab, rec):
     """friction_jit.step_jacobians: every step's (A, G) of the records rec, as _local_jacobians."""
     k, nt = rec.code.shape
