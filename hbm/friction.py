@@ -1390,14 +1390,26 @@ class FrictionContacts:
             times (k, 2) the instants whose disks fix w (shakedown.refine; nan for none: stuck
             from rest).
         """
+        k, nt = len(idx), u.shape[2]
+        w, times = np.zeros(k, dtype=complex), np.full((k, 2), np.nan)
+        st = (np.arange(nt)[:, None] + _STENCIL) % nt
+        if USE_JIT and friction_jit.AVAILABLE:
+            N, (open_all, closed_all, stuck_all) = np.empty((k, nt)), (np.empty(k, dtype=bool) for _ in range(3))
+            friction_jit.classify(np.asarray(u, float), self.kt[idx], self.mu[idx], self.kn[idx],
+                                  self.n0[idx], self.gap[idx], N, open_all, closed_all, stuck_all)
+        else:
+            N, open_all, closed_all, stuck_all = self._classify_numpy(u, idx, st)
+        if self.shakedown:
+            self._shaken(u, U, idx, N, closed_all & ~stuck_all, st, stuck_all, w, times)
+        return open_all, stuck_all, w, times
+
+    def _classify_numpy(self, u: np.ndarray, idx: np.ndarray, st: np.ndarray):
+        """:meth:`_classify`'s tests in numpy: N (k, nt), open_all, closed_all, stuck_all (k,)."""
         N = self.n0[idx, None] + self.kn[idx, None] * (u[:, 2] - self.gap[idx, None])
         open_all = np.all(N <= 0.0, axis=1)
         closed_all = np.all(N > 0.0, axis=1)
         T2 = self.kt[idx, None] ** 2 * (u[:, 0] ** 2 + u[:, 1] ** 2)
         stuck_all = closed_all & np.all(T2 <= (self.mu[idx, None] * N) ** 2, axis=1)
-        k, nt = len(idx), u.shape[2]
-        w, times = np.zeros(k, dtype=complex), np.full((k, 2), np.nan)
-        st = (np.arange(nt)[:, None] + _STENCIL) % nt
         c = np.nonzero(stuck_all)[0]
         if c.size:
             # as the march would find from w = 0: no excursion outside the limit, and no opening,
@@ -1415,9 +1427,7 @@ class FrictionContacts:
                 over, _ = _stick_peak(ct[e, j], Lc[e, j], kt[e, j], np.zeros(e.size), np.zeros(e.size))
                 ok[e[over]] = False
             stuck_all[c[~ok]] = False
-        if self.shakedown:
-            self._shaken(u, U, idx, N, closed_all & ~stuck_all, st, stuck_all, w, times)
-        return open_all, stuck_all, w, times
+        return N, open_all, closed_all, stuck_all
 
     def _shaken(self, u, U, idx, N, cand, st, stuck_all, w, times) -> None:
         """Mark stuck (in place) the closed elements that can stick all cycle on some slider, with

@@ -1138,3 +1138,65 @@ def cycle_matrix(g, kt, ut, L, al, be, det, code, wst, AP, AQ, cP, cQ):
                 Q[m] = _cm(p2, q1) + _cm(q2, p1.conjugate())
             n //= 2
         cP[i], cQ[i] = P[0], Q[0]
+
+
+# ============================================================================ classification
+@njit(cache=True, error_model="numpy")
+def classify(u, kt, mu, kn, n0, gap, N, open_all, closed_all, stuck_all):
+    """friction.FrictionContacts._classify's tests for elements' samples u (k, 3, nt), in place:
+    N (k, nt) n0 + kn (u_n - g); open_all, closed_all (k,); stuck_all (k,): closed at every
+    sample with the stuck force inside the limit there, the normal load positive at the steps'
+    Gauss points (or no friction) and the stuck force inside the limit between the samples too
+    (:func:`_stick_over` from rest, as the march would find). The numpy version's ~50 array
+    operations cost 3.3 ms per residual at the resonator's middle level (8 % of a curve)."""
+    k, _, nt = u.shape
+    ct = np.empty(4, dtype=np.complex128)
+    Lc = np.empty(4)
+    for e in range(k):
+        m, kte = mu[e], kt[e]
+        opn, cls, stk = True, True, True
+        for j in range(nt):
+            x = n0[e] + kn[e] * (u[e, 2, j] - gap[e])
+            N[e, j] = x
+            opn = opn and x <= 0.0
+            cls = cls and x > 0.0
+            u0, u1 = u[e, 0, j], u[e, 1, j]
+            stk = stk and (kte * kte) * (u0 * u0 + u1 * u1) <= (m * x) * (m * x)
+        open_all[e], closed_all[e] = opn, cls
+        stk = stk and cls
+        j = 0
+        while stk and j < nt:
+            cr0 = cr1 = cr2 = cr3 = 0.0
+            ci0 = ci1 = ci2 = ci3 = 0.0
+            n_0 = n_1 = n_2 = n_3 = 0.0
+            for i in range(4):
+                q = j + i - 2
+                if q < 0:
+                    q += nt
+                elif q >= nt:
+                    q -= nt
+                xr, xi, xn = u[e, 0, q], u[e, 1, q], N[e, q]
+                v0, v1, v2, v3 = VINV[0, i], VINV[1, i], VINV[2, i], VINV[3, i]
+                cr0 += xr * v0
+                cr1 += xr * v1
+                cr2 += xr * v2
+                cr3 += xr * v3
+                ci0 += xi * v0
+                ci1 += xi * v1
+                ci2 += xi * v2
+                ci3 += xi * v3
+                n_0 += xn * v0
+                n_1 += xn * v1
+                n_2 += xn * v2
+                n_3 += xn * v3
+            ng0 = n_0 + GAUSS0 * (n_1 + GAUSS0 * (n_2 + GAUSS0 * n_3))
+            ng1 = n_0 + GAUSS1 * (n_1 + GAUSS1 * (n_2 + GAUSS1 * n_3))
+            if m != 0.0 and not (ng0 > 0.0 and ng1 > 0.0):
+                stk = False
+                break
+            ct[0], ct[1], ct[2], ct[3] = complex(cr0, ci0), complex(cr1, ci1), complex(cr2, ci2), complex(cr3, ci3)
+            Lc[0], Lc[1], Lc[2], Lc[3] = m * n_0, m * n_1, m * n_2, m * n_3
+            if _stick_over(ct, Lc, kte, 0.0j, 0.0)[0]:
+                stk = False
+            j += 1
+        stuck_all[e] = stk

@@ -347,6 +347,34 @@ def test_stick_step_slips_on_excursion_inside_step():
     assert not over[0]
 
 
+def test_compiled_classification_equals_the_numpy_one(monkeypatch):
+    """friction_jit.classify against the numpy tests of _classify: the same N and the same open,
+    closed and stuck elements, among them one stuck at every sample whose cubic path leaves the
+    limit between two samples (not stuck), the same path under a higher limit (stuck), one
+    without friction, one open, one closed only part of the cycle."""
+    use_path("jit", monkeypatch)
+    nt = 8
+    pattern = np.array([0.3, 0.9, 0.9, 0.3, -0.3, -0.9, -0.9, -0.3])   # middle of 0.9, 0.9: 0.975
+    u = np.zeros((6, 3, nt))
+    u[0, 0] = u[1, 0] = pattern * (0.0295 / 0.9)      # kt |u_t| <= 2.95 < mu N0 = 3 at the samples
+    u[1, 2] = 0.0001                                  # N0 + 0.1 N: inside between samples too
+    u[2, 0] = 0.0                                     # no friction, no tangential motion: stuck
+    u[3, 2] = -0.02                                   # open
+    u[4, 2] = 0.02 * np.cos(2 * np.pi * np.arange(nt) / nt)   # opens for part of the cycle
+    u[5, 0] = 0.01 * np.sin(2 * np.pi * np.arange(nt) / nt)   # deep inside
+    c = contacts(6, mu=np.array([MU, 1.1 * MU, 0.0, MU, MU, MU]))
+    idx = np.arange(6)
+    out = []
+    for jit in (False, True):
+        monkeypatch.setattr(friction, "USE_JIT", jit)
+        out.append(c._classify(u, np.zeros((6, 3, 5)), idx))
+    (open_n, stuck_n, w_n, _), (open_j, stuck_j, w_j, _) = out
+    assert np.array_equal(open_n, open_j) and np.array_equal(stuck_n, stuck_j)
+    assert np.array_equal(w_n, w_j)
+    assert list(stuck_j) == [False, True, True, False, False, True]
+    assert list(open_j) == [False, False, False, True, False, False]
+
+
 def test_redo_gives_up_when_contraction_predicts_no_closure():
     """The plain-repetition redo stops as soon as the contraction per period predicts that the
     cycle will not close within the budget (it used to march the whole budget, then fail)."""
