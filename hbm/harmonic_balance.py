@@ -140,6 +140,17 @@ def _contact_operator(dofs: np.ndarray, n: int) -> sp.csr_matrix:
 
 
 
+def _blocks_times(D: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """D_k x_k for blocks D (k, a, b) and rows x (k, b): (k, a). numpy's batched matmul, 1.8x
+    faster than einsum for the friction elements' 21 x 21 blocks (37 against 68 us for 353)."""
+    return np.matmul(D, x[:, :, None])[:, :, 0]
+
+
+def _blocks_transposed_times(D: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """D_kᵀ x_k for blocks D (k, a, b) and rows x (k, a): (k, b)."""
+    return np.matmul(x[:, None, :], D)[:, 0, :]
+
+
 def _modal_apply(Psi: np.ndarray, Ls: list, v: np.ndarray) -> np.ndarray:
     """Modal part of the receptance on real harmonic rows: (n_H, n) -> (n_H, n).
 
@@ -468,7 +479,7 @@ class HarmonicBalance:
     def _expand(self, omega, nl, cn, idx, Dg, xN):
         """G (dg/dU x_N) on all contact coordinates for a reduced vector x_N."""
         k, nH = nl.size, self.nH
-        ge = np.einsum("kxy,ky->kx", Dg, xN[idx])
+        ge = _blocks_times(Dg, xN[idx])
         gfull = np.zeros((nH, self.nc))
         gfull[:, cn] = self.from_contact(ge.reshape(k, 3, nH))
         return self.gapply(omega, gfull)
@@ -573,7 +584,7 @@ class HarmonicBalance:
         V = np.empty((m, P))
         for j, row in enumerate(rows):                  # rows . (D x) = (D^T rows) . x
             rN = row[:, cn].ravel()
-            V[j, idx] = np.einsum("kyx,ky->kx", Dg, rN[idx])
+            V[j, idx] = _blocks_transposed_times(Dg, rN[idx])
         V *= row_scale
         Ss = row_scale * np.asarray(S, float)
 
@@ -661,7 +672,7 @@ class HarmonicBalance:
         tR[:, cn] = 0.0
         y = self.gapply(omega, tR, transpose=True)[:, cn].ravel()
         v = tU[:, cn].ravel().copy()
-        v[idx] -= np.einsum("kyx,ky->kx", Dg, y[idx])
+        v[idx] -= _blocks_transposed_times(Dg, y[idx])
         beta = tw - np.sum(tR * Rw)
         RwN = Rw[:, cn].ravel()
         Bm = np.stack([np.concatenate([-R[:, cn].ravel(), [-c + np.sum(tR * R)]]) for R, c in rhs], axis=1)
@@ -736,7 +747,7 @@ class HarmonicBalance:
             Ls = [self.G.modal(h, omega) for h in range(self.H + 1)]
 
         def matvec(x):
-            ge = np.einsum("kxy,ky->kx", Dg, x[idx])
+            ge = _blocks_times(Dg, x[idx])
             gv = np.empty(P)
             gv[idx] = ge
             v = gv.reshape(nH, p)

@@ -323,7 +323,7 @@ class NonlinearModeProblem:
         out = np.zeros((hb.ne, 3, hb.nH))
         if nl.size:
             Xe = hb.to_contact(X)[nl].reshape(nl.size, -1)
-            out[nl] = np.einsum("kxy,ky->kx", Dg, Xe).reshape(nl.size, 3, hb.nH)
+            out[nl] = np.matmul(Dg, Xe[:, :, None])[:, :, 0].reshape(nl.size, 3, hb.nH)
         return hb.from_contact(out)
 
     def _row(self, dg, a):

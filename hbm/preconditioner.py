@@ -214,7 +214,7 @@ class ElementBlockPreconditioner:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """Approximate J^-1 x for x (n_H p,) in the reduced layout."""
         out = np.empty_like(x)
-        out[self.idx] = np.einsum("kab,kb->ka", self.inv, x[self.idx])
+        out[self.idx] = np.matmul(self.inv, x[self.idx][:, :, None])[:, :, 0]
         return out
 
 
