@@ -151,22 +151,25 @@ def _blocks_transposed_times(D: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.matmul(x[:, None, :], D)[:, 0, :]
 
 
-def _modal_apply(Psi: np.ndarray, Ls: list, v: np.ndarray) -> np.ndarray:
+def _modal_apply(Psi: np.ndarray, Ls, v: np.ndarray) -> np.ndarray:
     """Modal part of the receptance on real harmonic rows: (n_H, n) -> (n_H, n).
 
     Row 0 is the mean, rows 2h-1, 2h the cosine and sine of harmonic h (complex amplitude
-    c_h = x - i y); Ls[h] the modal factors of harmonic h, (m,) diagonal or (m, m). The two
-    products with the real mode shapes Psi (n, m) run once on all real rows: complex products per
-    harmonic converted Psi to complex on every call, which cost more than the products.
+    c_h = x - i y); Ls[h] the modal factors of harmonic h, (m,) diagonal or (m, m), or their
+    :class:`_DiagonalFactors`. The two products with the real mode shapes Psi (n, m) run once on
+    all real rows: complex products per harmonic converted Psi to complex on every call, which
+    cost more than the products.
     """
     W = Psi.T @ v.T                                                   # (m, n_H)
+    if not isinstance(Ls, _DiagonalFactors):
+        Ls = _DiagonalFactors.of(Ls) or Ls
+    if isinstance(Ls, _DiagonalFactors):
+        return (Psi @ Ls.times(W)).T
     S = np.empty_like(W)
     for h, L in enumerate(Ls):
         if h == 0:
             S[:, 0] = (L * W[:, 0]).real if L.ndim == 1 else (L @ W[:, 0]).real
         elif L.ndim == 1:
-            # (a + ib)(x - iy) in real arithmetic: numpy's complex product may contract to FMA
-            # on some paths and not on others, which made two equal runs differ in the last bit
             a, b, x, y = L.real, L.imag, W[:, 2 * h - 1], W[:, 2 * h]
             S[:, 2 * h - 1] = a * x + b * y
             S[:, 2 * h] = a * y - b * x
@@ -174,6 +177,33 @@ def _modal_apply(Psi: np.ndarray, Ls: list, v: np.ndarray) -> np.ndarray:
             z = L @ (W[:, 2 * h - 1] - 1j * W[:, 2 * h])
             S[:, 2 * h - 1], S[:, 2 * h] = z.real, -z.imag
     return (Psi @ S).T
+
+
+class _DiagonalFactors:
+    """Diagonal modal factors of harmonics 0..H as real arrays, so that a product with them is
+    five array operations instead of four per harmonic (it ran in every GMRES iteration:
+    90 us a call, most of it the Python loop over harmonics)."""
+
+    def __init__(self, Ls: list) -> None:
+        self.L0 = np.ascontiguousarray(Ls[0].real)
+        self.a = np.stack([L.real for L in Ls[1:]], axis=1)          # (m, H)
+        self.b = np.stack([L.imag for L in Ls[1:]], axis=1)
+
+    @classmethod
+    def of(cls, Ls) -> "_DiagonalFactors | None":
+        """The factors of Ls when each is diagonal (m,), else None."""
+        return cls(Ls) if all(np.ndim(L) == 1 for L in Ls) else None
+
+    def times(self, W: np.ndarray) -> np.ndarray:
+        """The factors applied to the modal rows W (m, n_H): (a + ib)(x - iy) in real
+        arithmetic, row 0 the mean (numpy's complex product may contract to FMA on some paths
+        and not on others, which made two equal runs differ in the last bit)."""
+        x, y = W[:, 1::2], W[:, 2::2]
+        S = np.empty_like(W)
+        S[:, 0] = self.L0 * W[:, 0]
+        S[:, 1::2] = self.a * x + self.b * y
+        S[:, 2::2] = self.a * y - self.b * x
+        return S
 
 #: Newton gives up when its residual has not halved in this many iterations (see ``newton``) ...
 STALL_ITERATIONS = 10
@@ -745,6 +775,7 @@ class HarmonicBalance:
             R, Psi = self._contact_rows(nl, cn)
         if Ls is None:
             Ls = [self.G.modal(h, omega) for h in range(self.H + 1)]
+        factors = _DiagonalFactors.of(Ls) or Ls
 
         def matvec(x):
             ge = _blocks_times(Dg, x[idx])
@@ -755,7 +786,7 @@ class HarmonicBalance:
             # OpenBLAS computes the (n_H, p) x (p, p) product 1.6x faster than the (p, p) x
             # (p, n_H) one (0.63 against 1.03 ms at p = 1059, n_H = 7: the R product was 30 %
             # of a top-level curve)
-            return x + (v @ R + _modal_apply(Psi, Ls, v)).ravel()
+            return x + (v @ R + _modal_apply(Psi, factors, v)).ravel()
         return matvec
 
     def _contact_rows(self, nl: np.ndarray, cn: np.ndarray):
