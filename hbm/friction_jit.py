@@ -981,6 +981,39 @@ def _sinc_r(r: float) -> float:
 
 
 @njit(cache=True, error_model="numpy")
+def _stencil_cubics(ue, nrow, j: int) -> tuple:
+    """Power coefficients of the cubics through samples j-2..j+1 (friction._VINV, periodic) of
+    one element's u_t = ue[0] + i ue[1] (4 complex) and of nrow (4 real): friction._StepTables'
+    ct and Nc in numpy's summation order."""
+    nt = nrow.size
+    cr0 = cr1 = cr2 = cr3 = 0.0
+    ci0 = ci1 = ci2 = ci3 = 0.0
+    n_0 = n_1 = n_2 = n_3 = 0.0
+    for i in range(4):
+        q = j + i - 2
+        if q < 0:
+            q += nt
+        elif q >= nt:
+            q -= nt
+        xr, xi, xn = ue[0, q], ue[1, q], nrow[q]
+        v0, v1, v2, v3 = VINV[0, i], VINV[1, i], VINV[2, i], VINV[3, i]
+        cr0 += xr * v0
+        cr1 += xr * v1
+        cr2 += xr * v2
+        cr3 += xr * v3
+        ci0 += xi * v0
+        ci1 += xi * v1
+        ci2 += xi * v2
+        ci3 += xi * v3
+        n_0 += xn * v0
+        n_1 += xn * v1
+        n_2 += xn * v2
+        n_3 += xn * v3
+    return (complex(cr0, ci0), complex(cr1, ci1), complex(cr2, ci2), complex(cr3, ci3),
+            n_0, n_1, n_2, n_3)
+
+
+@njit(cache=True, error_model="numpy")
 def step_tables(u, kt, mu, kn, n0, gap, ut, N, closed, tcl, L, ct, Nc, Lc, pg, Lg, bad, tlo, al,
                 be, pe, Lpe, scale, det):
     """friction._StepTables' arrays for elements' samples u (k, 3, nt), filled in place (the
@@ -1004,31 +1037,7 @@ def step_tables(u, kt, mu, kn, n0, gap, ut, N, closed, tcl, L, ct, Nc, Lc, pg, L
             peak = max(peak, m * N[e, j])
         scale[e] = max(peak, 1e-300) / kte
         for j in range(nt):
-            cr0 = cr1 = cr2 = cr3 = 0.0
-            ci0 = ci1 = ci2 = ci3 = 0.0
-            n_0 = n_1 = n_2 = n_3 = 0.0
-            for i in range(4):
-                q = j + i - 2
-                if q < 0:
-                    q += nt
-                elif q >= nt:
-                    q -= nt
-                xr, xi, xn = u[e, 0, q], u[e, 1, q], nraw[q]
-                v0, v1, v2, v3 = VINV[0, i], VINV[1, i], VINV[2, i], VINV[3, i]
-                cr0 += xr * v0
-                cr1 += xr * v1
-                cr2 += xr * v2
-                cr3 += xr * v3
-                ci0 += xi * v0
-                ci1 += xi * v1
-                ci2 += xi * v2
-                ci3 += xi * v3
-                n_0 += xn * v0
-                n_1 += xn * v1
-                n_2 += xn * v2
-                n_3 += xn * v3
-            c0, c1 = complex(cr0, ci0), complex(cr1, ci1)
-            c2, c3 = complex(cr2, ci2), complex(cr3, ci3)
+            c0, c1, c2, c3, n_0, n_1, n_2, n_3 = _stencil_cubics(u[e], nraw, j)
             ct[e, j, 0], ct[e, j, 1], ct[e, j, 2], ct[e, j, 3] = c0, c1, c2, c3
             Nc[e, j, 0], Nc[e, j, 1], Nc[e, j, 2], Nc[e, j, 3] = n_0, n_1, n_2, n_3
             Lc[e, j, 0], Lc[e, j, 1], Lc[e, j, 2], Lc[e, j, 3] = m * n_0, m * n_1, m * n_2, m * n_3
@@ -1166,35 +1175,13 @@ def classify(u, kt, mu, kn, n0, gap, N, open_all, closed_all, stuck_all):
         stk = stk and cls
         j = 0
         while stk and j < nt:
-            cr0 = cr1 = cr2 = cr3 = 0.0
-            ci0 = ci1 = ci2 = ci3 = 0.0
-            n_0 = n_1 = n_2 = n_3 = 0.0
-            for i in range(4):
-                q = j + i - 2
-                if q < 0:
-                    q += nt
-                elif q >= nt:
-                    q -= nt
-                xr, xi, xn = u[e, 0, q], u[e, 1, q], N[e, q]
-                v0, v1, v2, v3 = VINV[0, i], VINV[1, i], VINV[2, i], VINV[3, i]
-                cr0 += xr * v0
-                cr1 += xr * v1
-                cr2 += xr * v2
-                cr3 += xr * v3
-                ci0 += xi * v0
-                ci1 += xi * v1
-                ci2 += xi * v2
-                ci3 += xi * v3
-                n_0 += xn * v0
-                n_1 += xn * v1
-                n_2 += xn * v2
-                n_3 += xn * v3
+            c0, c1, c2, c3, n_0, n_1, n_2, n_3 = _stencil_cubics(u[e], N[e], j)
             ng0 = n_0 + GAUSS0 * (n_1 + GAUSS0 * (n_2 + GAUSS0 * n_3))
             ng1 = n_0 + GAUSS1 * (n_1 + GAUSS1 * (n_2 + GAUSS1 * n_3))
             if m != 0.0 and not (ng0 > 0.0 and ng1 > 0.0):
                 stk = False
                 break
-            ct[0], ct[1], ct[2], ct[3] = complex(cr0, ci0), complex(cr1, ci1), complex(cr2, ci2), complex(cr3, ci3)
+            ct[0], ct[1], ct[2], ct[3] = c0, c1, c2, c3
             Lc[0], Lc[1], Lc[2], Lc[3] = m * n_0, m * n_1, m * n_2, m * n_3
             if _stick_over(ct, Lc, kte, 0.0j, 0.0)[0]:
                 stk = False
