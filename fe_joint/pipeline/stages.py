@@ -110,10 +110,11 @@ def stage_contact(ctx: StageContext) -> dict:
     t_smooth = time.perf_counter() - t0
     # seed statistics and the hardness-capped sweep (no FRFs; study/variants.py)
     t0 = time.perf_counter()
-    seeds = variants.seed_study(setup, rm, r, surfaces, comm=ctx.comm)
+    own = variants.own_numbers(setup, rm, r, surfaces, comm=ctx.comm)
+    seeds = variants.seed_study(setup, rm, r, surfaces, comm=ctx.comm, own=own)
     t_seeds = time.perf_counter() - t0
     t0 = time.perf_counter()
-    capped = variants.hardness_study(setup, rm, r, surfaces, comm=ctx.comm)
+    capped = variants.hardness_study(setup, rm, r, surfaces, comm=ctx.comm, own=own)
     t_capped = time.perf_counter() - t0
     t0 = time.perf_counter()
     definitions = stiff_defs.contact_study(setup, rm, surfaces, kn_smooth, comm=ctx.comm)

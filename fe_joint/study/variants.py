@@ -133,8 +133,18 @@ def statistics(values) -> dict:
             "min": float(v.min()), "max": float(v.max()), "n": int(len(v))}
 
 
+def own_numbers(setup: InterfaceSetup, rm, roughness, surfaces: dict[float, SurfaceContact],
+                comm=None) -> dict:
+    """:func:`joint_numbers` of the study's own surfaces, {rq: numbers} (one per rank at a
+    time): the first seed of :func:`seed_study` and the uncapped side of :func:`hardness_study`."""
+    rqs = sorted(surfaces)
+    rows = map_ranks(lambda rq: joint_numbers(setup, rm, surfaces[rq], roughness.hardness, None),
+                     rqs, comm)
+    return dict(zip(rqs, rows))
+
+
 def seed_study(setup: InterfaceSetup, rm, roughness, surfaces: dict[float, SurfaceContact],
-               comm=None) -> dict:
+               comm=None, own: dict | None = None) -> dict:
     """Several surface realizations per Rq of the sweep: per-seed numbers and their statistics.
 
     Args:
@@ -143,6 +153,7 @@ def seed_study(setup: InterfaceSetup, rm, roughness, surfaces: dict[float, Surfa
         roughness: the case's Roughness section (rq_um, v_rq_um, corr_length, seed, seeds, hardness).
         surfaces: the study's own surfaces (seed ``roughness.seed``), reused as the first seed.
         comm: MPI communicator (the realizations dealt to the ranks) or None.
+        own: :func:`own_numbers` when already computed (else computed here).
     Returns:
         {rq label: {"rq_um", "seeds": [...], "per_seed": {number: [...]}, "stats": {number: stats}}}.
     """
@@ -150,8 +161,8 @@ def seed_study(setup: InterfaceSetup, rm, roughness, surfaces: dict[float, Surfa
     seeds = [roughness.seed + i for i in range(roughness.seeds)]
     # each realization on one rank (a BEM solve and a stuck frequency: 20 of them took 14 s on
     # both ranks alike); the study's own surface first, whose exact frequency is the others' shift
-    first = map_ranks(lambda rq: joint_numbers(setup, rm, surfaces[rq], roughness.hardness, None),
-                      rqs, comm)
+    own = own_numbers(setup, rm, roughness, surfaces, comm) if own is None else own
+    first = [own[rq] for rq in rqs]
     f0 = {rq: row["stuck_hz"] for rq, row in zip(rqs, first)}
 
     def other(item):
@@ -169,9 +180,12 @@ def seed_study(setup: InterfaceSetup, rm, roughness, surfaces: dict[float, Surfa
 
 
 def hardness_study(setup: InterfaceSetup, rm, roughness, surfaces: dict[float, SurfaceContact],
-                   comm=None) -> dict:
+                   comm=None, own: dict | None = None) -> dict:
     """The sweep's surfaces with the pressure capped at ``roughness.material_hardness``.
 
+    Args:
+        own: :func:`own_numbers` when already computed (the stage shares those of
+            :func:`seed_study`: the same four joints' stuck frequencies were solved twice).
     Returns:
         {} when the hardness is 0; else {"hardness_MPa": H, "surfaces": {rq label: {"rq_um",
         "study": numbers of the study's own solve, "capped": numbers with the cap}}}.
@@ -179,10 +193,11 @@ def hardness_study(setup: InterfaceSetup, rm, roughness, surfaces: dict[float, S
     H = roughness.material_hardness
     if H <= 0:
         return {}
+    own = own_numbers(setup, rm, roughness, surfaces, comm) if own is None else own
+
     def one(rq):
-        own = joint_numbers(setup, rm, surfaces[rq], roughness.hardness, None)
         sc = rough_contact(setup, rq, roughness.corr_length, roughness.seed, hardness=H)
-        return {"rq_um": rq, "study": own, "capped": joint_numbers(setup, rm, sc, H, own["stuck_hz"])}
+        return {"rq_um": rq, "study": own[rq], "capped": joint_numbers(setup, rm, sc, H, own[rq]["stuck_hz"])}
     rqs = sorted(surfaces)
     return {"hardness_MPa": H, "surfaces": {rq_label(rq): r for rq, r in zip(rqs, map_ranks(one, rqs, comm))}}
 
