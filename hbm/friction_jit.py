@@ -986,8 +986,7 @@ def _stencil_cubics(ue, nrow, j: int) -> tuple:
     one element's u_t = ue[0] + i ue[1] (4 complex) and of nrow (4 real): friction._StepTables'
     ct and Nc in numpy's summation order."""
     nt = nrow.size
-    cr0 = cr1 = cr2 = cr3 = 0.0
-    ci0 = ci1 = ci2 = ci3 = 0.0
+    c0 = c1 = c2 = c3 = 0.0j
     n_0 = n_1 = n_2 = n_3 = 0.0
     for i in range(4):
         q = j + i - 2
@@ -995,22 +994,18 @@ def _stencil_cubics(ue, nrow, j: int) -> tuple:
             q += nt
         elif q >= nt:
             q -= nt
-        xr, xi, xn = ue[0, q], ue[1, q], nrow[q]
+        x, xn = complex(ue[0, q], ue[1, q]), nrow[q]
         v0, v1, v2, v3 = VINV[0, i], VINV[1, i], VINV[2, i], VINV[3, i]
-        cr0 += xr * v0
-        cr1 += xr * v1
-        cr2 += xr * v2
-        cr3 += xr * v3
-        ci0 += xi * v0
-        ci1 += xi * v1
-        ci2 += xi * v2
-        ci3 += xi * v3
+        # (x + 0 i) v: each part's product alone, as numpy's complex-by-real matmul
+        c0 += complex(x.real * v0, x.imag * v0)
+        c1 += complex(x.real * v1, x.imag * v1)
+        c2 += complex(x.real * v2, x.imag * v2)
+        c3 += complex(x.real * v3, x.imag * v3)
         n_0 += xn * v0
         n_1 += xn * v1
         n_2 += xn * v2
         n_3 += xn * v3
-    return (complex(cr0, ci0), complex(cr1, ci1), complex(cr2, ci2), complex(cr3, ci3),
-            n_0, n_1, n_2, n_3)
+    return c0, c1, c2, c3, n_0, n_1, n_2, n_3
 
 
 @njit(cache=True, error_model="numpy")
