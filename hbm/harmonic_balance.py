@@ -583,7 +583,7 @@ class HarmonicBalance:
 
     def linsolve_bordered(self, omega: float, nl: np.ndarray, Dg, cols: list[np.ndarray],
                           rows: list[np.ndarray], S: np.ndarray, R: np.ndarray, r: np.ndarray,
-                          row_scale: float = 1.0):
+                          row_scale: float = 1.0, atol: float | None = None):
         """One GMRES run on a Newton system with m borders (the nonlinear modes' frequency and
         damping), where ``linsolve`` would take m + 1 runs:
 
@@ -598,6 +598,8 @@ class HarmonicBalance:
             rows: m arrays (n_H, n_c): the border equations' functionals of D dU.
             S: (m, m) the border equations' derivatives in the border unknowns.
             R: (n_H, n_c) residual; r: (m,) border residuals.
+            atol: the linear residual the step needs (in the scaled rows; None: ``krylov_tol``
+                relative, see :meth:`krylov_rtol`).
         Returns:
             (dU (n_H, n_c), s (m,)), or None where the dense path applies (``dense_limit``,
             after GMRES failures): the caller then solves the m + 1 right-hand sides with
@@ -624,7 +626,7 @@ class HarmonicBalance:
         def pc(z):
             return np.concatenate([prec(z[:P]), np.linalg.solve(Ss, z[P:])])
         b = np.concatenate([-R[:, cn].ravel(), -row_scale * np.asarray(r, float)])
-        z = self._krylov(mv, pc, b[:, None], P + m)[:, 0]
+        z = self._krylov(mv, pc, b[:, None], P + m, None if atol is None else [atol])[:, 0]
         s_ = z[P:]
         dU = -R - sum(c * sk for c, sk in zip(cols, s_)) - self._expand(omega, nl, cn, idx, Dg, z[:P])
         return dU, s_
