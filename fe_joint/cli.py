@@ -199,12 +199,12 @@ def _dispatch(args: argparse.Namespace) -> int:
 
     _import_gmsh_keeping_sigint()
     from .pipeline.runner import run_stages
-    from .pipeline.stages import REGISTRY
+    from .pipeline.stages import PREPARATIONS, REGISTRY
     comm = MPI.COMM_WORLD
     lock = _claim(out, option, comm)
     try:
         ctx = run_stages(case, out, stages, REGISTRY, comm=comm, force=args.force,
-                         progress=not args.no_progress)
+                         progress=not args.no_progress, prepare=PREPARATIONS)
     finally:
         if lock is not None:
             lock.release()

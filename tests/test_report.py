@@ -350,3 +350,14 @@ def test_texts_differ_by_their_printed_numbers() -> None:
     assert (p0, p1) == ("/f[0]", "/f[1]")
     assert r0 == pytest.approx(0.1 / 602, rel=1e-12) and math.isinf(r1)
     assert differences({"t": "X 1.5e-3 mm"}, {"t": "X 1.5e-3 µm"})[0][0] == math.inf
+
+
+def test_cost_table_names_the_stages_rank_0_ran_alone() -> None:
+    """A stage that ran on one rank of a run on two (``runner.SOLO_STAGES``) says so in the
+    cost table; on a serial run, or for a stage on every rank, nothing is added."""
+    from fe_joint.report.markdown import _alone
+    two = {"provenance": {"stages": {"fe": {"ranks": 1}, "dynamics": {"ranks": 2}, "report": {"ranks": "?"}}}}
+    assert _alone(two, "fe").startswith("rank 0 alone")
+    assert _alone(two, "dynamics") == "" and _alone(two, "report") == ""
+    one = {"provenance": {"stages": {"fe": {"ranks": 1}, "dynamics": {"ranks": 1}}}}
+    assert _alone(one, "fe") == "" and _alone({}, "fe") == ""

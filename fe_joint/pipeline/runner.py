@@ -59,6 +59,11 @@ STAGE_OUTPUTS: dict[str, tuple[str, ...]] = {
 }
 #: the effective case of a run, written into its folder (``fe-joint report DIR`` reads it)
 CASE_FILE = "case.toml"
+#: stages that gain little from a second rank (default model, serially / on 2 ranks: mesh 5.2 /
+#: 7.3 s, fe 42.1 / 33.9 s, contact 20.0 / 15.5 s; issue 16, session 26). When they run and a
+#: later stage has work that needs only the case (``run_stages``' ``prepare``: the speed stage's
+#: coarser FE models, 63 s on one rank), rank 0 runs them alone while the other ranks do that work
+SOLO_STAGES = ("mesh", "fe", "contact")
 
 
 @dataclass
@@ -156,7 +161,8 @@ def read_stage_log(out: Path) -> list[dict]:
 
 
 def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[str, Callable],
-               comm=None, force: bool = False, progress: bool = True) -> StageContext:
+               comm=None, force: bool = False, progress: bool = True,
+               prepare: dict[str, Callable] | None = None) -> StageContext:
     """Run ``stages`` in pipeline order, skipping those whose cached key matches.
 
     Args:
@@ -167,6 +173,11 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
         registry: stage name → function ``f(ctx) -> summary dict``.
         comm: mpi4py communicator (None: serial without MPI).
         force: rerun the requested stages even if cached.
+        prepare: stage name → ``f(ctx) -> [task]``, the work of that stage that needs only the
+            case (collective; every rank gets the same list of callables). On several ranks,
+            when :data:`SOLO_STAGES` are to run before that stage, rank 0 runs them alone and
+            the other ranks run the tasks meanwhile (:func:`_run_solo`); a task that fails is
+            left to its stage.
     Returns:
         The context with every stage's summary.
     """
@@ -184,7 +195,10 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
     # a stage is cached only if its key matches, it was computed from the current output of the
     # stage before it (each manifest records that stage's run id) and its files are intact
     prev_run = None
+    solo_done: set[str] = set()
     for s in needed:
+        if s in solo_done:
+            continue
         man = read_manifest(out, s)
         cached = False
         if rank == 0 and not (force and s in stages):
@@ -200,30 +214,104 @@ def run_stages(case: Case, out: Path, stages: tuple[str, ...], registry: dict[st
             ctx.summaries[s] = man.get("summary", {})
             _log(out, rank, {"stage": s, "action": "cached", "key": keys[s], "seconds": 0.0})
             continue
-        ctx.print(f"[fe-joint] stage {s} ...")
-        t0 = time.perf_counter()
-        ctx.pending = []
-        summary = registry[s](ctx) or {}
-        dt = time.perf_counter() - t0
-        if ctx.pending:
-            summary["warnings"] = [w.to_dict() for w in ctx.pending]
-        ctx.summaries[s] = summary
-        run_id = uuid.uuid4().hex if rank == 0 else None
-        if comm is not None:
-            run_id = comm.bcast(run_id, root=0)
-        if rank == 0:
-            _write_json_atomic(out / "stages" / f"{s}.json",
-                               {"stage": s, "key": keys[s], "seconds": dt, "summary": summary,
-                                "run_id": run_id, "upstream_run": prev_run,
-                                "files": stage_files(out, s, ctx),
-                                # what it ran on (after the stage: its imports are loaded)
-                                "environment": run_environment(comm)})
-        prev_run = ctx.runs[s] = run_id
-        _log(out, rank, {"stage": s, "action": "ran", "key": keys[s], "seconds": dt})
-        ctx.print(f"[fe-joint] stage {s} done in {dt:.1f} s")
-        if comm is not None:
-            comm.barrier()
+        # this stage runs, so every stage after it does (their upstream run changes)
+        solo = [t for t in needed[needed.index(s):] if t in SOLO_STAGES]
+        tasks = _side_tasks(ctx, needed, solo, prepare) if solo and solo[0] == s else []
+        if tasks:
+            prev_run = _run_solo(ctx, registry, solo, tasks, prev_run)
+            solo_done.update(solo)
+            continue
+        prev_run = _run_stage(ctx, registry, s, prev_run)
     return ctx
+
+
+def _run_stage(ctx: StageContext, registry: dict[str, Callable], s: str, prev_run) -> str:
+    """Run stage ``s`` on ``ctx.comm``: its summary, manifest (rank 0) and log line; returns
+    its run id."""
+    comm, rank, out = ctx.comm, ctx.rank, ctx.out
+    ctx.print(f"[fe-joint] stage {s} ...")
+    t0 = time.perf_counter()
+    ctx.pending = []
+    summary = registry[s](ctx) or {}
+    dt = time.perf_counter() - t0
+    if ctx.pending:
+        summary["warnings"] = [w.to_dict() for w in ctx.pending]
+    ctx.summaries[s] = summary
+    run_id = uuid.uuid4().hex if rank == 0 else None
+    if comm is not None:
+        run_id = comm.bcast(run_id, root=0)
+    if rank == 0:
+        _write_json_atomic(out / "stages" / f"{s}.json",
+                           {"stage": s, "key": ctx.keys[s], "seconds": dt, "summary": summary,
+                            "run_id": run_id, "upstream_run": prev_run,
+                            "files": stage_files(out, s, ctx),
+                            # what it ran on (after the stage: its imports are loaded)
+                            "environment": run_environment(comm)})
+    ctx.runs[s] = run_id
+    _log(out, rank, {"stage": s, "action": "ran", "key": ctx.keys[s], "seconds": dt})
+    ctx.print(f"[fe-joint] stage {s} done in {dt:.1f} s")
+    if comm is not None:
+        comm.barrier()
+    return run_id
+
+
+def _side_tasks(ctx: StageContext, needed: tuple[str, ...], solo: list[str],
+                prepare: dict[str, Callable] | None) -> list[Callable]:
+    """The tasks the ranks other than 0 run while rank 0 runs the ``solo`` stages alone: the
+    preparations of the stages after them (collective; [] on one rank)."""
+    if ctx.comm is None or ctx.comm.size < 2 or not prepare:
+        return []
+    return [task for t in needed[needed.index(solo[-1]) + 1:] if t in prepare
+            for task in prepare[t](ctx)]
+
+
+def _run_solo(ctx: StageContext, registry: dict[str, Callable], solo: list[str],
+              tasks: list[Callable], prev_run) -> str:
+    """Rank 0 runs the ``solo`` stages on a communicator of its own while the other ranks run
+    ``tasks`` (dealt round-robin); then every rank gets the stages' summaries and run ids, or
+    the exception that stopped rank 0 (raised on every rank, as a collective stage's would be).
+    Returns the last stage's run id."""
+    comm = ctx.comm
+    sub = comm.Split(0 if comm.rank == 0 else 1, comm.rank)
+    outcome = None
+    try:
+        if comm.rank == 0:
+            mine = StageContext(case=ctx.case, out=ctx.out, comm=sub, summaries=ctx.summaries,
+                                progress=ctx.progress, keys=ctx.keys, runs=ctx.runs, files=ctx.files)
+            try:
+                for s in solo:
+                    prev_run = _run_stage(mine, registry, s, prev_run)
+            except BaseException as e:       # the other ranks raise it too, then rank 0 does
+                outcome = ("error", _portable(e))
+                comm.bcast(outcome, root=0)
+                raise
+            outcome = ("done", {s: ctx.summaries[s] for s in solo}, {s: ctx.runs[s] for s in solo})
+        else:
+            for i, task in enumerate(tasks):
+                if i % sub.size == sub.rank:
+                    try:
+                        task()
+                    except Exception:      # noqa: BLE001 - the stage does that work itself then
+                        pass
+        outcome = comm.bcast(outcome, root=0)
+    finally:
+        sub.Free()
+    if outcome[0] == "error":
+        raise outcome[1]
+    ctx.summaries.update(outcome[1])
+    ctx.runs.update(outcome[2])
+    return outcome[2][solo[-1]]
+
+
+def _portable(e: BaseException) -> BaseException:
+    """``e`` if it survives pickling (to be sent to the other ranks), else a RuntimeError with
+    its message."""
+    import pickle
+    try:
+        pickle.loads(pickle.dumps(e))
+        return e
+    except Exception:   # noqa: BLE001
+        return RuntimeError(str(e))
 
 
 def _log(out: Path, rank: int, entry: dict) -> None:

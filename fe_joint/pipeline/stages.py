@@ -66,6 +66,7 @@ def stage_fe(ctx: StageContext) -> dict:
         "full_elastic_hz": fe_el.tolist(), "reduced_elastic_hz": rd_el.tolist(),
         "max_rel_freq_error": float(err.max()) if len(err) else None,
         "timings": {k: v for k, v in rm.metadata.get("timings", {}).items()},
+        "ranks": int(comm.size),
     }
     ctx.print(f"[fe-joint] fe: {rm.n_dofs} reduced DOFs, {rm.n_pairs} pairs "
               f"({summary['closed_pairs']} closed), first elastic f = {fe_el[0]:.2f} Hz, "
@@ -275,7 +276,8 @@ def _coarser_model(c, size: float) -> tuple:
     On this rank's own communicator, so that the two coarser models are built at once, one per
     rank, beside the stage's other rows: a 4.0 mm model took 29.9 s alone against 20.2 s on 2
     ranks, and the ranks had built the two one after the other (48 s of the 85 s stage). On one
-    rank or two the model is the same serial build.
+    rank or two the model is the same serial build. On several ranks they are usually built
+    ahead, while rank 0 runs the mesh, fe and contact stages alone (:func:`prepare_speed`).
     """
     import dataclasses
 
@@ -287,9 +289,89 @@ def _coarser_model(c, size: float) -> tuple:
     fe = load_resonator(dataclasses.replace(c.geometry, lap_mesh_size=size), MPI.COMM_SELF)
     rm = build_reduced_model_from_fe(fe, c.material, c.preload.bolt_force, c.reduction.damping_ratio,
                                      c.reduction.cutoff_hz, n_full_elastic=0)
-    sec = time.perf_counter() - t0
-    return size, rm, sec, joint_baseline(ms.interface_setup(rm, c.geometry, c.material, c.roughness),
-                                         c.contact.k_ref)
+    return _coarser_tuple(c, size, rm, time.perf_counter() - t0)
+
+
+def _coarser_tuple(c, size: float, rm: ReducedModel, seconds: float) -> tuple:
+    """(size, rm, FE seconds, the baseline joint on rm): what a row of the element-count table
+    needs of its model."""
+    return size, rm, seconds, joint_baseline(ms.interface_setup(rm, c.geometry, c.material, c.roughness),
+                                             c.contact.k_ref)
+
+
+#: the folder (under speed/) of the coarser FE models built ahead of the speed stage, and the
+#: version of their build (bump it when ``_coarser_model`` changes)
+COARSER_DIR, COARSER_VERSION = "models", "1"
+
+
+def _coarser_files(ctx: StageContext, index: int, size: float) -> tuple:
+    """The files of the ``index``-th coarser model (h5, json record) and the key of its inputs
+    (the fe stage's key, which chains the mesh's, and the lap mesh size)."""
+    import hashlib
+    key = hashlib.sha256(f"{COARSER_VERSION}|{ctx.keys.get('fe', '')}|{size!r}".encode()).hexdigest()[:16]
+    base = ctx.path("speed", COARSER_DIR, f"coarser-{index}")
+    return base.with_suffix(".h5"), base.with_suffix(".json"), key
+
+
+def _prebuilt_model(ctx: StageContext, index: int, size: float) -> tuple | None:
+    """The ``index``-th coarser model as :func:`_coarser_model` returns it, from its files when
+    they are there with this run's key and intact (else None)."""
+    from ..study.artifacts import check_files
+    h5, record, key = _coarser_files(ctx, index, size)
+    try:
+        rec = json.loads(record.read_text())
+    except (OSError, ValueError):
+        return None
+    if rec.get("key") != key or check_files(ctx.out, rec.get("files", {"?": {}})) is not None:
+        return None
+    return _coarser_tuple(ctx.case, size, ReducedModel.load(str(h5)), float(rec["fe_seconds"]))
+
+
+def _build_coarser(ctx: StageContext, index: int, size: float) -> None:
+    """Build the ``index``-th coarser model on this rank alone and write its files (the h5, then
+    the record naming its key, FE seconds and the h5's size and sha256)."""
+    import os
+
+    from ..study.artifacts import file_record
+    h5, record, key = _coarser_files(ctx, index, size)
+    _, rm, seconds, _ = _coarser_model(ctx.case, size)
+    h5.parent.mkdir(parents=True, exist_ok=True)
+    tmp = h5.with_name(h5.name + ".tmp")
+    rm.save(str(tmp))
+    os.replace(tmp, h5)
+    tmp = record.with_name(record.name + ".tmp")
+    tmp.write_text(json.dumps({"key": key, "lap_mesh_size": size, "fe_seconds": seconds,
+                               "files": file_record(ctx.out, [h5])}, indent=1))
+    os.replace(tmp, record)
+
+
+def prepare_speed(ctx: StageContext) -> list:
+    """The speed stage's work that needs only the case, for ranks that would otherwise wait
+    (``runner.SOLO_STAGES``): its coarser FE models not yet on disk, one task each
+    (:func:`_build_coarser`; the stage reads them back, :func:`_prebuilt_model`). Collective:
+    rank 0 looks at the files, every rank gets the same tasks."""
+    c = ctx.case
+    if not c.dynamics.speed_study:
+        return []
+    from ..study import speed_error as se
+    sizes = se.lap_mesh_sizes(c.geometry.lap_mesh_size)
+    todo = None
+    if ctx.rank == 0:
+        todo = []
+        for i, size in enumerate(sizes):
+            h5, record, key = _coarser_files(ctx, i, size)
+            try:
+                done = json.loads(record.read_text()).get("key") == key and h5.exists()
+            except (OSError, ValueError):
+                done = False
+            if not done:
+                todo.append(i)
+    todo = ctx.comm.bcast(todo, root=0) if ctx.comm is not None else todo
+    if todo:
+        # PETSc and SLEPc initialize collectively on COMM_WORLD: every rank imports the FE
+        # package before the ranks part (rank 0 for its fe stage, the others for these builds)
+        from ..fe import mesh, modal  # noqa: F401
+    return [lambda i=i: _build_coarser(ctx, i, sizes[i]) for i in todo]
 
 
 def _queue_record(ctx: StageContext, folder: str, schedule: list | None, wall: float) -> dict:
@@ -359,12 +441,14 @@ def _speed_tables(ctx: StageContext) -> tuple[dict, dict]:
     ranks = 1 if ctx.comm is None else ctx.comm.size
 
     def run(job: se.SpeedJob) -> dict:
-        if job.peak_of:
-            return {**se.own_fields(job, models), **({"FE ranks": ranks} if job.table == "mesh" else {})}
+        if job.peak_of:     # the case mesh's row: its FE model is the fe stage's
+            fe_ranks = (ctx.summaries.get("fe") or {}).get("ranks", ranks)
+            return {**se.own_fields(job, models), **({"FE ranks": fe_ranks} if job.table == "mesh" else {})}
         if job.table == "bem":
             return se.bem_row(rm, c, job.grid)
-        if job.table == "mesh":     # a coarser mesh: its FE model built by this rank alone
-            model = _coarser_model(c, se.lap_mesh_sizes(c.geometry.lap_mesh_size)[job.model])
+        if job.table == "mesh":     # a coarser mesh: its FE model built by one rank alone,
+            size = se.lap_mesh_sizes(c.geometry.lap_mesh_size)[job.model]   # maybe ahead
+            model = _prebuilt_model(ctx, job.model, size) or _coarser_model(c, size)
             return {**se.mesh_row(model, cr.level, settings), "FE ranks": 1}
         if job.table == "reference":
             return se.curve_reference(cr)
@@ -404,3 +488,5 @@ def stage_report(ctx: StageContext) -> dict:
 
 REGISTRY = {"mesh": stage_mesh, "fe": stage_fe, "contact": stage_contact,
             "dynamics": stage_dynamics, "speed": stage_speed, "report": stage_report}
+#: the stages' work that needs only the case (``runner.run_stages``' ``prepare``)
+PREPARATIONS = {"speed": prepare_speed}

@@ -165,7 +165,7 @@ def _cost(s: dict, t: dict) -> list[str]:
     """Wall time per stage and per FRF curve, s (from the timings ``t``), beside the paper's."""
     q = t.get("queues", {})
     L = ["", "## Cost", "", "| stage | wall time [s] | ranks busy in its job queue |", "|---|---|---|"]
-    L += [f"| {k} | {v:.1f} | {_busy(q.get(k))} |" for k, v in t["stages"].items()]
+    L += [f"| {k} | {v:.1f} | {_busy(q.get(k)) or _alone(t, k)} |" for k, v in t["stages"].items()]
     L += ["", "| FRF curve | points | wall time [s] | sweep's Newton tolerance |",
           "|---|---|---|---|"]
     L += [f"| {k} | {v['n_points']} | {t['curves'][k]:.1f} | {_sweep_tol(v)} |"
@@ -174,6 +174,16 @@ def _cost(s: dict, t: dict) -> list[str]:
     L += ["", "The paper's FORSE curves took 13 682 s (smooth, 1000 N) and 6 957 / 6 362 / 6 031 / 5 954 s "
           "(Rq 1 / 5 / 10 / 15 µm) on a 20-core node; its BEM analyses are in its Table 3."]
     return L
+
+
+def _alone(t: dict, stage: str) -> str:
+    """"rank 0 alone …" for a stage that ran on one rank of several (``runner.SOLO_STAGES``),
+    else ""."""
+    stages = t.get("provenance", {}).get("stages", {})
+    counts = [v.get("ranks") for v in stages.values() if isinstance(v.get("ranks"), int)]
+    if (stages.get(stage) or {}).get("ranks") == 1 and counts and max(counts) > 1:
+        return "rank 0 alone (the other ranks built the speed stage's coarser FE models meanwhile)"
+    return ""
 
 
 def _busy(queue: dict | None) -> str:
