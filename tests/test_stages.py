@@ -147,8 +147,8 @@ def test_coarser_models_built_ahead_are_read_back_only_with_their_key(tmp_path: 
 
     def build(c, size):
         built.append(size)
-        return size, _tiny_model(), 1.5 + size, None
-    monkeypatch.setattr(stages, "_coarser_model", build)
+        return _tiny_model(), 1.5 + size
+    monkeypatch.setattr(stages, "_coarser_reduced_model", build)
     monkeypatch.setattr(stages, "_coarser_tuple", lambda c, size, rm, sec: (size, rm, sec, None))
     case = load_case(preset="quick")
     case = dataclasses.replace(case, dynamics=dataclasses.replace(case.dynamics, speed_study=True))

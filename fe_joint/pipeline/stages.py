@@ -271,7 +271,12 @@ def stage_dynamics(ctx: StageContext) -> dict:
 def _coarser_model(c, size: float) -> tuple:
     """The case's reduced model at lap mesh size ``size`` (mm), built by this rank alone (a row
     of the element-count table, a job of the speed stage's queue):
-    (size, ReducedModel, FE seconds, baseline JointModel on it).
+    (size, ReducedModel, FE seconds, baseline JointModel on it)."""
+    return _coarser_tuple(c, size, *_coarser_reduced_model(c, size))
+
+
+def _coarser_reduced_model(c, size: float) -> tuple:
+    """:func:`_coarser_model`'s FE build: (ReducedModel, seconds).
 
     On this rank's own communicator, so that the two coarser models are built at once, one per
     rank, beside the stage's other rows: a 4.0 mm model took 29.9 s alone against 20.2 s on 2
@@ -289,7 +294,7 @@ def _coarser_model(c, size: float) -> tuple:
     fe = load_resonator(dataclasses.replace(c.geometry, lap_mesh_size=size), MPI.COMM_SELF)
     rm = build_reduced_model_from_fe(fe, c.material, c.preload.bolt_force, c.reduction.damping_ratio,
                                      c.reduction.cutoff_hz, n_full_elastic=0)
-    return _coarser_tuple(c, size, rm, time.perf_counter() - t0)
+    return rm, time.perf_counter() - t0
 
 
 def _coarser_tuple(c, size: float, rm: ReducedModel, seconds: float) -> tuple:
@@ -313,17 +318,24 @@ def _coarser_files(ctx: StageContext, index: int, size: float) -> tuple:
     return base.with_suffix(".h5"), base.with_suffix(".json"), key
 
 
-def _prebuilt_model(ctx: StageContext, index: int, size: float) -> tuple | None:
-    """The ``index``-th coarser model as :func:`_coarser_model` returns it, from its files when
-    they are there with this run's key and intact (else None)."""
-    from ..study.artifacts import check_files
-    h5, record, key = _coarser_files(ctx, index, size)
+def _coarser_record(ctx: StageContext, index: int, size: float) -> dict | None:
+    """The record of the ``index``-th coarser model when it names this run's key (else None)."""
+    _, record, key = _coarser_files(ctx, index, size)
     try:
         rec = json.loads(record.read_text())
     except (OSError, ValueError):
         return None
-    if rec.get("key") != key or check_files(ctx.out, rec.get("files", {"?": {}})) is not None:
+    return rec if rec.get("key") == key else None
+
+
+def _prebuilt_model(ctx: StageContext, index: int, size: float) -> tuple | None:
+    """The ``index``-th coarser model as :func:`_coarser_model` returns it, from its files when
+    they are there with this run's key and intact (else None)."""
+    from ..study.artifacts import check_files
+    rec = _coarser_record(ctx, index, size)
+    if rec is None or check_files(ctx.out, rec.get("files", {"?": {}})) is not None:
         return None
+    h5 = _coarser_files(ctx, index, size)[0]
     return _coarser_tuple(ctx.case, size, ReducedModel.load(str(h5)), float(rec["fe_seconds"]))
 
 
@@ -334,7 +346,7 @@ def _build_coarser(ctx: StageContext, index: int, size: float) -> None:
 
     from ..study.artifacts import file_record
     h5, record, key = _coarser_files(ctx, index, size)
-    _, rm, seconds, _ = _coarser_model(ctx.case, size)
+    rm, seconds = _coarser_reduced_model(ctx.case, size)
     h5.parent.mkdir(parents=True, exist_ok=True)
     tmp = h5.with_name(h5.name + ".tmp")
     rm.save(str(tmp))
@@ -356,16 +368,9 @@ def prepare_speed(ctx: StageContext) -> list:
     from ..study import speed_error as se
     sizes = se.lap_mesh_sizes(c.geometry.lap_mesh_size)
     todo = None
-    if ctx.rank == 0:
-        todo = []
-        for i, size in enumerate(sizes):
-            h5, record, key = _coarser_files(ctx, i, size)
-            try:
-                done = json.loads(record.read_text()).get("key") == key and h5.exists()
-            except (OSError, ValueError):
-                done = False
-            if not done:
-                todo.append(i)
+    if ctx.rank == 0:     # (the bytes are checked when the stage reads them)
+        todo = [i for i, size in enumerate(sizes) if _coarser_record(ctx, i, size) is None
+                or not _coarser_files(ctx, i, size)[0].exists()]
     todo = ctx.comm.bcast(todo, root=0) if ctx.comm is not None else todo
     if todo:
         # PETSc and SLEPc initialize collectively on COMM_WORLD: every rank imports the FE
