@@ -185,7 +185,7 @@ def test_receptances_kept_within_their_byte_budget(monkeypatch):
     k0 = np.array([30.0, 0, 0])
     G1 = s.receptance(B, k0)
     assert G1.nbytes == sum(a.nbytes for a in (G1.Kb, G1.Phi, G1.Psi, G1.R, G1.lam, G1.Cm,
-                                               G1._chol[0]))
+                                               G1._factor[0]))
     monkeypatch.setattr(LinearStructure, "RECEPTANCE_BYTES", 2.5 * G1.nbytes)
     G2 = s.receptance(B, 2 * k0)
     assert s.receptance(B, k0) is G1                   # two fit: G1 still kept (now newest)
