@@ -65,6 +65,54 @@ def _check_square(name: str, A, n: int | None) -> np.ndarray:
     return 0.5 * (A + A.T)
 
 
+def lowest_modes_and_factor(K: np.ndarray, M: np.ndarray, m: int,
+                            chol_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple, float]:
+    """The m lowest eigenpairs of (K, M), m < n, and the factor of K - shift M they came from.
+
+    Block Lanczos (:mod:`hbm.lanczos`, 0.8 against 1.3 s for LAPACK's subset eigh and a
+    Cholesky at 2198 DOFs), LAPACK's subset eigh where that does not converge. The shift
+    (:data:`SHIFT`) makes K - shift M positive definite for a free-free structure.
+
+    Args:
+        K, M: (n, n) stiffness (K positive semi-definite) and mass (positive definite).
+        m: pairs wanted.
+        chol_m: lower Cholesky factor of M.
+    Returns:
+        (lam (m,) ascending, Phi (n, m) M-orthonormal, ``cho_factor`` of K - shift M, shift).
+    Raises:
+        numpy.linalg.LinAlgError: K - shift M is not positive definite.
+    """
+    shift = -SHIFT * max(np.max(np.diag(K) / np.diag(M)), 1e-300)
+    factor = lanczos.shifted_factor(K, M, shift)
+    modes = lanczos.lowest_modes(K, M, m, shift, chol_m, factor=factor)
+    if modes is None:
+        return (*sla.eigh(K, M, subset_by_index=[0, m - 1]), factor, shift)
+    return modes.lam, modes.Phi, factor, shift
+
+
+def discarded_static_response(M: np.ndarray, factor: tuple, shift: float, lam: np.ndarray,
+                              Phi: np.ndarray, rigid: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Static response of the modes not kept to forces y (n,) or (n, k), about the shift:
+    Sum_discarded phi phi^T y / (lam - shift), found as P (K - shift M)^-1 P^T y less the kept
+    elastic modes' part, with P = I - Phi_r Phi_r^T M removing the rigid-body modes (the factor
+    resolves them only to eps lambda_max / |shift|). The shift changes a discarded mode's
+    1 / lam by shift / lam, below 1e-8 of it (:data:`SHIFT`).
+
+    Args:
+        M: (n, n) mass; factor, shift: from :func:`lowest_modes_and_factor`.
+        lam, Phi, rigid: the kept modes (m,), (n, m), (m,) bool (rigid ones with lam 0).
+        y: forces, N.
+    Returns:
+        displacements with y's shape, mm.
+    """
+    el = ~rigid
+    Pr, MPr = Phi[:, rigid], M @ Phi[:, rigid]
+    x = sla.cho_solve(factor, y - MPr @ (Pr.T @ y), check_finite=False)
+    x = x - Pr @ (MPr.T @ x)
+    d = lam[el] - shift
+    return x - Phi[:, el] @ ((Phi[:, el].T @ y) / (d[:, None] if y.ndim == 2 else d))
+
+
 class LinearStructure:
     """Linear structure M q'' + C q' + K q = f (units tonne, N/mm, N·s/mm).
 
@@ -153,11 +201,10 @@ class Receptance:
         self.B = B
         n, m = s.n, s.n_modes
         Kb = s.K + (B.T @ sp.diags(k0) @ B).toarray()
-        scale = max(np.max(np.diag(Kb) / np.diag(s.M)), 1e-300)
         self.complete = m == n
         self.Kb = Kb
         self._factor = None
-        lam, Phi = self._modes(Kb, m, scale)
+        lam, Phi = self._modes(Kb, m)
         rigid = rigid_modes(lam, Kb, s.M)
         lam = np.where(rigid, 0.0, lam)
         self.lam, self.Phi, self.rigid = lam, Phi, rigid
@@ -185,23 +232,13 @@ class Receptance:
             R = Y.T @ Y - (Pe / (lam[el] - self.shift)) @ Pe.T
             self.R = 0.5 * (R + R.T)
 
-    def _modes(self, Kb: np.ndarray, m: int, scale: float) -> tuple[np.ndarray, np.ndarray]:
-        """The m lowest eigenpairs of (K~, M); sets the shifted pencil's factor (incomplete bases).
-
-        All of them (m = n) by LAPACK's eigh; else by block Lanczos (:mod:`hbm.lanczos`, 0.8
-        against 1.3 s for the subset eigh and the static factorization at 2198 DOFs), LAPACK's
-        subset eigh where that does not converge. The shift (:data:`SHIFT`) makes K~ - shift M
-        positive definite for a free-free structure.
-        """
-        s = self.s
+    def _modes(self, Kb: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """The m lowest eigenpairs of (K~, M): all of them (m = n) by LAPACK's eigh, else by
+        :func:`lowest_modes_and_factor` (which sets the shifted pencil's factor)."""
         if self.complete:
-            return sla.eigh(Kb, s.M)
-        self.shift = -SHIFT * scale
-        self._factor = lanczos.shifted_factor(Kb, s.M, self.shift)
-        modes = lanczos.lowest_modes(Kb, s.M, m, self.shift, s.chol_m, factor=self._factor)
-        if modes is None:
-            return sla.eigh(Kb, s.M, subset_by_index=[0, m - 1])
-        return modes.lam, modes.Phi
+            return sla.eigh(Kb, self.s.M)
+        lam, Phi, self._factor, self.shift = lowest_modes_and_factor(Kb, self.s.M, m, self.s.chol_m)
+        return lam, Phi
 
     @property
     def nbytes(self) -> int:
@@ -257,18 +294,12 @@ class Receptance:
         return u
 
     def residual_full(self, y: np.ndarray) -> np.ndarray:
-        """Static response of the discarded modes to forces y (n,) or (n, k), about the shift:
-        Sum_discarded phi phi^T y / (lam - shift), found as P (K~ - shift M)^-1 P^T y less the
-        kept elastic modes' part, P = I - Phi_r Phi_r^T M removing the rigid-body modes (as for
-        R). The shift changes a discarded mode's 1 / lam by shift / lam, below 1e-8 of it."""
+        """Static response of the discarded modes to forces y (n,) or (n, k)
+        (:func:`discarded_static_response`)."""
         if self.complete:
             return np.zeros_like(y)
-        Phi, rigid, el = self.Phi, self.rigid, ~self.rigid
-        Pr, MPr = Phi[:, rigid], self.s.M @ Phi[:, rigid]
-        x = sla.cho_solve(self._factor, y - MPr @ (Pr.T @ y), check_finite=False)
-        x = x - Pr @ (MPr.T @ x)
-        d = self.lam[el] - self.shift
-        return x - Phi[:, el] @ ((Phi[:, el].T @ y) / (d[:, None] if y.ndim == 2 else d))
+        return discarded_static_response(self.s.M, self._factor, self.shift, self.lam, self.Phi,
+                                         self.rigid, y)
 
     def residual_row(self, dof: int) -> np.ndarray:
         """Row ``dof`` of the static residual flexibility (n,), cached (one solve per DOF)."""

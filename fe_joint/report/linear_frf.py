@@ -12,8 +12,10 @@ over every mode of a model of up to ``ALL_MODES_UP_TO`` DOFs (S = 0), else over 
 others, S = [K_s⁻¹ − Σ_kept φ φᵀ / ω_r²]_(resp, exc) (rigid modes removed as in ``hbm.structure``).
 What S leaves out, the dynamic amplification and damping of the modes above the kept ones, is
 (f / f_kept)² of S, below what a figure shows: on the default model within 2.6e-5 of the full
-superposition over 200–260 Hz (median 8.5e-7). One subset eigh and one Cholesky: 1.2 s against
-2.3 s for the full eigh at 2198 DOFs (issue 16, session 24).
+superposition over 200–260 Hz (median 8.5e-7). The kept modes and S come as the HBM's do
+(``hbm.structure.lowest_modes_and_factor``: block Lanczos on one Cholesky factor, 0.6 s against
+1.2 s for LAPACK's subset eigh and a second Cholesky at 2198 DOFs, and 2.3 s for the full eigh;
+issue 16, sessions 24 and 27).
 """
 from __future__ import annotations
 
@@ -22,7 +24,7 @@ from collections import OrderedDict
 import numpy as np
 import scipy.linalg as sla
 
-from hbm.structure import rigid_modes
+from hbm.structure import discarded_static_response, lowest_modes_and_factor, rigid_modes
 
 from ..model.joint import JointModel, _springs_digest, remember_stuck_modes, stuck_modes, stuck_stiffness
 
@@ -53,15 +55,22 @@ class StuckReceptance:
             return
         Ks = stuck_stiffness(rm.K, rm.pair_dofs, joint)
         n = Ks.shape[0]
-        m = n if n <= ALL_MODES_UP_TO else KEPT_MODES
-        w2, phi = sla.eigh(Ks, rm.M, subset_by_index=[0, m - 1])
+        if n <= ALL_MODES_UP_TO:
+            w2, phi = sla.eigh(Ks, rm.M)
+        else:
+            w2, phi, factor, shift = lowest_modes_and_factor(Ks, rm.M, KEPT_MODES,
+                                                             np.linalg.cholesky(rm.M))
         rigid = rigid_modes(w2, Ks, rm.M)                       # free–free: rigid modes undamped
         self.w2 = np.where(rigid, 0.0, w2)
         self.wr = np.sqrt(self.w2)
         self.zeta = np.where(rigid, 0.0, rm.damping_ratio)
         self.num = phi[rm.response_dof] * phi[rm.excitation_dof]
-        self.static = 0.0 if m == n else _static_residual(Ks, rm.M, phi, self.w2, rigid,
-                                                          rm.response_dof, rm.excitation_dof)
+        self.static = 0.0
+        if n > ALL_MODES_UP_TO:
+            e = np.zeros(n)
+            e[rm.excitation_dof] = 1.0
+            self.static = float(discarded_static_response(rm.M, factor, shift, self.w2, phi, rigid,
+                                                          e)[rm.response_dof])
         self._remember(rm, joint)
 
     def _remember(self, rm, joint: JointModel) -> None:
@@ -86,22 +95,6 @@ class StuckReceptance:
         return np.sum(self.num / (self.w2 - w ** 2 + 2j * self.zeta * self.wr * w), axis=1) + self.static
 
 
-def _static_residual(Ks: np.ndarray, M: np.ndarray, phi: np.ndarray, w2: np.ndarray,
-                     rigid: np.ndarray, resp: int, exc: int) -> float:
-    """[K_s⁻¹ − Σ_kept φ φᵀ / ω²]_(resp, exc) over the elastic modes, mm/N: the static response
-    of the modes not kept. A free–free K_s is made regular with its rigid modes shifted to the
-    lowest elastic eigenvalue σ, (K_s + σ M Φ_r Φ_r^T M)⁻¹ − Φ_r Φ_r^T / σ, as in
-    ``hbm.structure.Receptance``."""
-    el = ~rigid
-    sigma = w2[el][0]
-    Pr = M @ phi[:, rigid]
-    e = np.zeros(Ks.shape[0])
-    e[exc] = 1.0
-    x = sla.cho_solve(sla.cho_factor(Ks + sigma * Pr @ Pr.T), e)
-    flex = x[resp] - phi[resp, rigid] @ phi[exc, rigid] / sigma
-    return float(flex - np.sum(phi[resp, el] * phi[exc, el] / w2[el]))
-
-
 def stuck_receptance(rm, joint: JointModel, freq_hz: np.ndarray) -> np.ndarray:
     """Receptance of the stuck structure between the excitation and response DOFs.
 
@@ -117,8 +110,8 @@ def stuck_receptance(rm, joint: JointModel, freq_hz: np.ndarray) -> np.ndarray:
 
 def share_eigenproblems(data, comm) -> None:
     """The report's costliest eigenproblems, dealt to the ranks before rank 0 writes the report:
-    each configuration joint's stuck receptance (a subset eigh and a Cholesky, 1.2 s at the
-    default model's 2198 DOFs) and its ten stuck modes (0.3 s). The results are cached on every
+    each configuration joint's stuck receptance (its kept modes and static residual, 0.6 s at
+    the default model's 2198 DOFs) and its ten stuck modes (0.3 s). The results are cached on every
     rank, so rank 0's figures and tables find them; they are the same bits as rank 0's own
     (the same computation on the same inputs, one BLAS thread). Collective.
 
