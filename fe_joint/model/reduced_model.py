@@ -45,7 +45,7 @@ LANCZOS_MIN_DOFS = 200
 #: K - sigma M of a free-free structure is positive definite (a Cholesky), as in fe.modal
 LANCZOS_SHIFT = -(2 * np.pi * 1.0) ** 2
 #: M's Cholesky factor for the last mass matrix seen (by identity: a study's joints share the
-#: reduced model's M, and the factor is 0.1 s of a 0.3 s solve at 2198 DOFs)
+#: reduced model's M, and the factor is 0.1 s of a 0.2 s solve at 2198 DOFs)
 _CHOL_M: list = []
 
 
@@ -61,10 +61,10 @@ def lowest_modes(K: np.ndarray, M: np.ndarray, m: int) -> tuple[np.ndarray, np.n
 
     Block shift-invert Lanczos about ``LANCZOS_SHIFT`` on one dense Cholesky of K - sigma M
     (``hbm.lanczos``, the receptance's: every pair to a backward error of 1e-9, from a fixed
-    start). On the default model's stuck joints (2198 DOFs, m = 10) 0.3 s against 0.4 s for
+    start). On the default model's stuck joints (2198 DOFs, m = 10) 0.21 s against 0.29 s for
     ARPACK's single-vector Lanczos (sessions 20-26) and 0.72 s for LAPACK's subset eigh (a
     tridiagonalization of the whole matrix); the breathing mode's frequency equal to ARPACK's
-    within 2e-9. Small problems, many modes of one, or no convergence: the dense eigh.
+    within 3.2e-9. Small problems, many modes of one, or no convergence: the dense eigh.
 
     Args:
         K, M: (n, n) stiffness (N/mm) and mass (t).

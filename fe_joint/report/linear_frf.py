@@ -13,9 +13,9 @@ others, S = [K_s⁻¹ − Σ_kept φ φᵀ / ω_r²]_(resp, exc) (rigid modes re
 What S leaves out, the dynamic amplification and damping of the modes above the kept ones, is
 (f / f_kept)² of S, below what a figure shows: on the default model within 2.6e-5 of the full
 superposition over 200–260 Hz (median 8.5e-7). The kept modes and S come as the HBM's do
-(``hbm.structure.lowest_modes_and_factor``: block Lanczos on one Cholesky factor, 0.6 s against
-1.2 s for LAPACK's subset eigh and a second Cholesky at 2198 DOFs, and 2.3 s for the full eigh;
-issue 16, sessions 24 and 27).
+(``hbm.structure.lowest_modes_and_factor``: block Lanczos on one Cholesky factor, 0.74-0.82 s
+with M's Cholesky where LAPACK's subset eigh alone took 0.89 s and the full eigh 2.3 s at 2198
+DOFs; issue 16, sessions 24 and 27).
 """
 from __future__ import annotations
 
@@ -110,8 +110,8 @@ def stuck_receptance(rm, joint: JointModel, freq_hz: np.ndarray) -> np.ndarray:
 
 def share_eigenproblems(data, comm) -> None:
     """The report's costliest eigenproblems, dealt to the ranks before rank 0 writes the report:
-    each configuration joint's stuck receptance (its kept modes and static residual, 0.6 s at
-    the default model's 2198 DOFs) and its ten stuck modes (0.3 s). The results are cached on every
+    each configuration joint's stuck receptance (its kept modes and static residual, 0.8 s at
+    the default model's 2198 DOFs) and its ten stuck modes (0.2 s). The results are cached on every
     rank, so rank 0's figures and tables find them; they are the same bits as rank 0's own
     (the same computation on the same inputs, one BLAS thread). Collective.
 
