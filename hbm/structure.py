@@ -7,14 +7,16 @@ once (the lowest ``n_modes`` pairs of (K~, M): block Lanczos on the factor of K~
 flexibility, so that
 
     G(h w) = Psi (Omega^2 - (h w)^2 + i h w C_m)^-1 Psi^T + R,        Psi = B Phi,
-    R = B (K~ - shift M)^-1 B^T - Psi (Omega^2 - shift)^-1 Psi^T,
+    R = B P (K~ - shift M)^-1 P^T B^T - Psi_el (Omega_el^2 - shift)^-1 Psi_el^T,
+
+(P = I - Phi_r Phi_r^T M removes the rigid-body modes, el: the kept elastic modes)
 
 is exact at h w = 0 (to shift / lambda_discarded, below 1e-8) and accurate below the cut-off.
 The shift is a small negative number (``RIGID_TOL`` of the largest diag K~ / diag M), so that
 K~ - shift M is positive definite for a free-free structure. Rigid-body modes are detected by
 their zero eigenvalue; they enter the dynamic harmonics (h >= 1) through the modal sum and are
 removed from the static one (h = 0): the 0th harmonic only sees self-equilibrated contact
-forces. They are among the kept modes, so R holds none of them.
+forces. They are among the kept modes and P keeps them out of R.
 """
 from __future__ import annotations
 
