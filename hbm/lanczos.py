@@ -83,10 +83,13 @@ def lowest_modes(K: np.ndarray, M: np.ndarray, m: int, shift: float, chol_m: np.
         :class:`Modes`, or None when the pairs did not converge within :data:`MAX_BLOCKS`
         blocks or the basis would not fit (the caller then uses a dense eigh).
     Raises:
+        ValueError: m is not an integer in [1, n].
         numpy.linalg.LinAlgError: K - shift M is not positive definite.
     """
     n = K.shape[0]
-    b = block_size(m)
+    if isinstance(m, bool) or int(m) != m or not 1 <= m <= n:
+        raise ValueError(f"m must be an integer in [1, {n}], got {m!r}")
+    b = block_size(int(m))
     cap = min(MAX_BLOCKS * b, n)
     if MIN_BLOCKS * b > n:
         return None

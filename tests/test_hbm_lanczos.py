@@ -37,6 +37,13 @@ def test_lowest_modes_of_a_consistent_mass_chain():
     assert res.max() <= lanczos.TOL * np.abs(K).sum(axis=0).max() * np.linalg.norm(modes.Phi, axis=0).min()
 
 
+@pytest.mark.parametrize("m", [0, 602, 2.5, True])
+def test_lowest_modes_reject_a_bad_count(m):
+    K, M, exact = consistent_mass_chain(600)
+    with pytest.raises(ValueError, match=r"m must be an integer in \[1, 601\]"):
+        lanczos.lowest_modes(K, M, m, -1e-3 * exact[1], np.linalg.cholesky(M))
+
+
 def test_lowest_modes_give_up_within_the_block_limit(monkeypatch):
     """Too few blocks allowed: None (the receptance then takes LAPACK's eigh), never unconverged pairs."""
     K, M, exact = consistent_mass_chain(600)
