@@ -49,7 +49,8 @@ LANCZOS_SHIFT = -(2 * np.pi * 1.0) ** 2
 _CHOL_M: list = []
 
 
-def _chol_m(M: np.ndarray) -> np.ndarray:
+def mass_cholesky(M: np.ndarray) -> np.ndarray:
+    """Lower Cholesky factor of M, kept for the last M seen (by identity; M is never modified)."""
     if not (_CHOL_M and _CHOL_M[0] is M):
         _CHOL_M[:] = [M, np.linalg.cholesky(M)]
     return _CHOL_M[1]
@@ -79,7 +80,7 @@ def lowest_modes(K: np.ndarray, M: np.ndarray, m: int) -> tuple[np.ndarray, np.n
     modes = None
     if n >= LANCZOS_MIN_DOFS and 4 * m <= n:
         try:
-            modes = lanczos.lowest_modes(K, M, m, LANCZOS_SHIFT, _chol_m(M))
+            modes = lanczos.lowest_modes(K, M, m, LANCZOS_SHIFT, mass_cholesky(M))
         except np.linalg.LinAlgError:      # K not positive semi-definite: no Cholesky
             modes = None
     if modes is None:

@@ -27,6 +27,7 @@ import scipy.linalg as sla
 from hbm.structure import discarded_static_response, lowest_modes_and_factor, rigid_modes
 
 from ..model.joint import JointModel, _springs_digest, remember_stuck_modes, stuck_modes, stuck_stiffness
+from ..model.reduced_model import mass_cholesky
 
 #: the receptances computed lately, by the identity of the reduced model and the joint's springs
 #: (the FRF figures and a rank that computed them for rank 0: :func:`share_eigenproblems`)
@@ -55,18 +56,18 @@ class StuckReceptance:
             return
         Ks = stuck_stiffness(rm.K, rm.pair_dofs, joint)
         n = Ks.shape[0]
-        if n <= ALL_MODES_UP_TO:
+        complete = n <= ALL_MODES_UP_TO
+        if complete:
             w2, phi = sla.eigh(Ks, rm.M)
         else:
-            w2, phi, factor, shift = lowest_modes_and_factor(Ks, rm.M, KEPT_MODES,
-                                                             np.linalg.cholesky(rm.M))
+            w2, phi, factor, shift = lowest_modes_and_factor(Ks, rm.M, KEPT_MODES, mass_cholesky(rm.M))
         rigid = rigid_modes(w2, Ks, rm.M)                       # free–free: rigid modes undamped
         self.w2 = np.where(rigid, 0.0, w2)
         self.wr = np.sqrt(self.w2)
         self.zeta = np.where(rigid, 0.0, rm.damping_ratio)
         self.num = phi[rm.response_dof] * phi[rm.excitation_dof]
         self.static = 0.0
-        if n > ALL_MODES_UP_TO:
+        if not complete:
             e = np.zeros(n)
             e[rm.excitation_dof] = 1.0
             self.static = float(discarded_static_response(rm.M, factor, shift, self.w2, phi, rigid,
