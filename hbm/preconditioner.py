@@ -282,9 +282,197 @@ class TwoLevelPreconditioner:
         return z + self.element(x - self.matvec(z))
 
 
+#: elements per patch of the two-level preconditioner's coarse space (``PatchPreconditioner``):
+#: on Newton systems captured from the default model's top-level baseline sweep, patches of 12 /
+#: 15 / 20 elements took 211 / 239 / 268 GMRES iterations where the element blocks took 1192
+#: (28 systems); the coarse LU grows as (21 k / PATCH_ELEMENTS)^3
+PATCH_ELEMENTS = 15
+#: medoid refinements of the patches (``interface_patches``): one or three gave 239 / 240
+#: iterations on those systems against 282 with the farthest-point seeds alone
+PATCH_ROUNDS = 2
+
+
+def element_coupling(R: np.ndarray) -> np.ndarray:
+    """Normalized elastic coupling of the elements through R: |tr R_ij| / sqrt(tr R_ii tr R_jj).
+
+    Args:
+        R: (3k, 3k) static residual flexibility on the elements' contact coordinates, mm/N.
+    Returns:
+        (k, k), 1 on the diagonal.
+    """
+    k = R.shape[0] // 3
+    t = np.einsum("iaja->ij", R.reshape(k, 3, k, 3))
+    s = np.sqrt(np.abs(np.diag(t)))
+    s[s == 0] = 1.0
+    return np.abs(t) / np.outer(s, s)
+
+
+def interface_patches(R: np.ndarray, n: int, rounds: int = PATCH_ROUNDS) -> np.ndarray:
+    """Groups the elements into about n patches of strongly coupled neighbours, from R alone
+    (no coordinates: a joint's elements couple through the elastic body as their distance does).
+
+    Seeds by farthest-point sampling in the coupling (the next seed is the element least coupled
+    to every seed so far), each element joining the seed it is most coupled to, then ``rounds``
+    times each patch's seed moved to its medoid (the element most coupled to its patch).
+
+    Args:
+        R: (3k, 3k) static residual flexibility on the elements' coordinates.
+        n: number of patches wanted (clipped to [1, k]).
+    Returns:
+        (k,) patch labels 0..n'-1, every patch non-empty.
+    """
+    C = element_coupling(R)
+    k = C.shape[0]
+    n = max(1, min(int(n), k))
+    seeds = [int(np.argmin(C.sum(axis=1)))]
+    near = C[seeds[0]].copy()
+    for _ in range(n - 1):
+        j = int(np.argmin(near))
+        seeds.append(j)
+        np.maximum(near, C[j], out=near)
+    seeds = np.array(seeds)
+    for _ in range(rounds):
+        lab = np.argmax(C[seeds], axis=0)
+        member = lab[None, :] == np.arange(n)[:, None]                      # (n, k)
+        inside = np.where(member, member.astype(float) @ C, -np.inf)
+        seeds = np.argmax(inside, axis=1)
+    _, lab = np.unique(np.argmax(C[seeds], axis=0), return_inverse=True)
+    return lab
+
+
+def _modal_mix(Ls: list, W: np.ndarray) -> np.ndarray:
+    """The modal factors of each harmonic applied to modal rows W (m, n_H, ...): row 0 the mean,
+    rows 2h-1, 2h the cosine and sine of harmonic h (complex amplitude x - i y), as the
+    receptance's modal part does; Ls[h] (m,) diagonal or (m, m)."""
+    S = np.empty_like(W)
+    for h, L in enumerate(Ls):
+        if h == 0:
+            L0 = L.real
+            S[:, 0] = (L0.reshape((-1,) + (1,) * (W.ndim - 2)) * W[:, 0] if L0.ndim == 1
+                       else np.tensordot(L0, W[:, 0], axes=1))
+            continue
+        z = W[:, 2 * h - 1] - 1j * W[:, 2 * h]
+        z = (L.reshape((-1,) + (1,) * (W.ndim - 2)) * z if L.ndim == 1
+             else np.tensordot(L, z, axes=1))
+        S[:, 2 * h - 1], S[:, 2 * h] = z.real, -z.imag
+    return S
+
+
+class PatchSpace:
+    """The coarse space of ``PatchPreconditioner`` for one nonlinear set: per patch of elements
+    (``interface_patches``), direction and harmonic row, the patch's uniform motion (normalized),
+    Z (n_H p, 21 n_patches); and Z^T R, Z^T Psi, which carry the coarse rows of J's product.
+
+    Args:
+        R: (p, p) static residual flexibility on the elements' contact coordinates, mm/N.
+        Psi: (p, m) contact rows of the kept modes.
+        nH: harmonic rows 2H + 1.
+        per_patch: elements per patch (:data:`PATCH_ELEMENTS`).
+    """
+
+    def __init__(self, R: np.ndarray, Psi: np.ndarray, nH: int,
+                 per_patch: int = PATCH_ELEMENTS) -> None:
+        p, m = Psi.shape
+        k = p // 3
+        lab = interface_patches(R, max(1, round(k / per_patch)))
+        nc = int(lab.max()) + 1
+        order = np.argsort(lab, kind="stable")
+        starts = np.searchsorted(lab[order], np.arange(nc))
+        size = np.diff(np.append(starts, k))
+        w = 1.0 / np.sqrt(size)[lab]                                    # (k,) Z's entries
+        self.k, self.nH, self.nc, self.m = k, nH, nc, m
+        self.lab, self.order, self.starts, self.size, self.w = lab, order, starts, size, w
+        ws = w[order, None, None]
+        # the coarse rows (patch, direction) of R and Psi, and their columns sorted by patch
+        ZR = np.add.reduceat(R.reshape(k, 3, p)[order] * ws, starts, axis=0).reshape(3 * nc, p)
+        self.ZR = ZR                                                    # (3 nc, p)
+        self.ZR_sorted = np.ascontiguousarray(ZR.reshape(3 * nc, k, 3)[:, order].reshape(3 * nc, p))
+        Pe = Psi.reshape(k, 3, m)
+        self.ZPsi = np.add.reduceat(Pe[order] * ws, starts, axis=0).reshape(3 * nc, m)
+        self.PsiT_sorted = np.ascontiguousarray(Pe[order].transpose(2, 0, 1).reshape(m, p))
+
+    def restrict(self, r: np.ndarray) -> np.ndarray:
+        """Z^T r for r (n_H p,) in the reduced layout: (nc n_H 3,), order (patch, row, direction)."""
+        x = r.reshape(self.nH, self.k, 3)[:, self.order] * self.w[self.order, None]
+        return np.add.reduceat(x, self.starts, axis=1).transpose(1, 0, 2).ravel()
+
+    def prolong(self, c: np.ndarray) -> np.ndarray:
+        """Z c for coarse c (nc n_H 3,): (n_H p,) in the reduced layout."""
+        c = c.reshape(self.nc, self.nH, 3)
+        return (c[self.lab].transpose(1, 0, 2) * self.w[None, :, None]).ravel()
+
+
+class PatchPreconditioner:
+    """Two-level (``preconditioner="patches"``): the element blocks (``ElementBlockPreconditioner``)
+    and a coarse correction on patches of elements (``PatchSpace``): z = E r, then
+    z + Z (Z^T J Z)^-1 Z^T (r - J z) (the "deflation" order A-DEF2, Tang et al. 2009).
+
+    What the element blocks leave is the elastic coupling between elements in J = I + G D: D is
+    the friction Jacobian minus the stuck springs, so where elements slip or open the block's own
+    share (R_ee D_e about -0.3 on the top-level curves) is a third of the coupling through the
+    neighbours' R (normalized row sums about 3): GMRES then needs 40-100 iterations, and the
+    slow part is smooth over the interface. One uniform motion per patch, direction and harmonic
+    row catches it; one over the whole interface did not (session 24).
+
+    Z^T J z needs only the coarse rows of G (Z^T R, Z^T Psi: 3 nc x p), so an application costs
+    the element blocks, one block product with D, a (3 nc, p) x (p, n_H) product and the coarse
+    solve, not a second product with J; Z^T J Z is assembled patch by patch from D's blocks
+    (no products with J). Set-up per solve: the element blocks and one LU of 21 nc unknowns.
+
+    Args: as :class:`ElementBlockPreconditioner`, and
+        space: the nonlinear set's :class:`PatchSpace`.
+    """
+
+    fresh = True
+
+    def __init__(self, space: PatchSpace, R: np.ndarray, Psi: np.ndarray, Ls: list,
+                 Dg: np.ndarray) -> None:
+        self.element = ElementBlockPreconditioner(R, Psi, Ls, Dg)
+        sp_, k, nH, nc, m = space, space.k, space.nH, space.nc, space.m
+        self.space, self.Dg, self.Ls, self.Psi = space, Dg, Ls, Psi
+        d, hh = np.divmod(np.arange(3 * nH), nH)
+        self.idx = hh[None, :] * 3 * k + 3 * np.arange(k)[:, None] + d[None, :]
+        # Z^T G D Z, column (patch c, row h, direction d): D Z is w_e D_e[:, d n_H + h] on c
+        D = (Dg * sp_.w[:, None, None])[sp_.order].reshape(3 * k, nH * 3 * nH)     # sorted
+        A = np.empty((nc, 3 * nc, nH * 3 * nH))
+        U = np.empty((nc, m, nH * 3 * nH))
+        for c in range(nc):
+            s = slice(3 * sp_.starts[c], 3 * (sp_.starts[c] + sp_.size[c]))
+            A[c] = sp_.ZR_sorted[:, s] @ D[s]
+            U[c] = sp_.PsiT_sorted[:, s] @ D[s]
+        U = U.reshape(nc, m, nH, 3 * nH).transpose(1, 2, 0, 3)                 # (m, h', c, b)
+        A += (sp_.ZPsi @ _modal_mix(Ls, U).reshape(m, -1)).reshape(3 * nc, nH, nc, 3 * nH) \
+            .transpose(2, 0, 1, 3).reshape(nc, 3 * nc, nH * 3 * nH)
+        # rows (c', d', h'), columns (c, d, h) -> both in the coarse order (patch, row, direction)
+        Ac = A.reshape(nc, nc, 3, nH, 3, nH).transpose(1, 3, 2, 0, 5, 4).reshape(3 * nH * nc, -1)
+        Ac[np.diag_indices_from(Ac)] += 1.0                                     # Z^T Z = I
+        lu, piv = sla.lu_factor(Ac, check_finite=False)
+        pivots = np.abs(np.diag(lu))
+        # a singular coarse matrix (J may be nearly singular at a fold): the element blocks alone
+        self.lu = (lu, piv) if np.all(np.isfinite(lu)) and pivots.min() > 1e-13 * pivots.max() else None
+
+    def coarse_rows(self, z: np.ndarray) -> np.ndarray:
+        """Z^T J z for z (n_H p,) in the reduced layout, from the coarse rows of R and Psi."""
+        sp_, nH = self.space, self.space.nH
+        g = np.empty_like(z)
+        g[self.idx] = np.matmul(self.Dg, z[self.idx][:, :, None])[:, :, 0]
+        g = g.reshape(nH, -1).T                                                 # (p, n_H)
+        out = sp_.ZR @ g + sp_.ZPsi @ _modal_mix(self.Ls, self.Psi.T @ g)       # (3 nc, n_H)
+        return sp_.restrict(z) + out.reshape(sp_.nc, 3, nH).transpose(0, 2, 1).ravel()
+
+    def __call__(self, r: np.ndarray) -> np.ndarray:
+        """Approximate J^-1 r for r (n_H p,) in the reduced layout."""
+        z = self.element(r)
+        if self.lu is None:
+            return z
+        c = sla.lu_solve(self.lu, self.space.restrict(r) - self.coarse_rows(z), check_finite=False)
+        return z + self.space.prolong(c)
+
+
 #: the preconditioners ``HarmonicBalance(preconditioner=...)`` accepts ("two-level" is built by
 #: the solver from the averaged one and the element blocks, as it needs the Jacobian's product)
 PRECONDITIONERS = {"averaged": HarmonicAveragedPreconditioner,
                    "mean-coupled": MeanCoupledPreconditioner,
                    "element": ElementBlockPreconditioner,
-                   "two-level": HarmonicAveragedPreconditioner}
+                   "two-level": HarmonicAveragedPreconditioner,
+                   "patches": PatchPreconditioner}

@@ -111,7 +111,7 @@ def test_the_preconditioner_is_the_inverse_on_the_structure_it_keeps():
 
 
 def test_gmres_with_each_preconditioner_gives_the_direct_solution():
-    for name in ("element", "averaged", "mean-coupled", "two-level"):
+    for name in ("patches", "element", "averaged", "mean-coupled", "two-level"):
         _check_gmres_solution(name)
 
 
