@@ -53,8 +53,8 @@ from .dense import MIXED_SIZE, lu_solve, lu_solve_sign
 from .errors import ConvergenceError, CycleNotClosed
 from .fourier import Fourier
 from .friction import FrictionContacts, once
-from .preconditioner import (PRECONDITIONERS, ElementBlockPreconditioner, PatchPreconditioner,
-                             PatchSpace, TwoLevelPreconditioner)
+from .preconditioner import (PRECONDITIONERS, CoarseFactor, ElementBlockPreconditioner,
+                             PatchPreconditioner, PatchSpace, TwoLevelPreconditioner)
 from .structure import LinearStructure
 
 
@@ -254,6 +254,15 @@ DENSE_FALLBACK_SIZE = 0.9
 GMRES_RESTART = 300
 GMRES_MAXITER = 4
 
+#: the "patches" preconditioner's coarse level is switched on when a solve with the element
+#: blocks alone took more than COARSE_ON GMRES iterations, and off again when a solve with it
+#: took fewer than COARSE_OFF (its set-up, about as much as the element blocks', then buys
+#: less than it saves): on the default model the top-level curves (41 iterations per solve
+#: with the element blocks alone, 15 with the patches) keep it, the middle level's v1 curve
+#: (14 against 10, 0.6 s slower with it) goes without
+COARSE_ON = 20
+COARSE_OFF = 8
+
 
 class _PreconditionerCache:
     """A preconditioner kept between GMRES solves, with the conditions of its reuse.
@@ -336,6 +345,8 @@ class HarmonicBalance:
         self.ne, self.nc = c.ne, 3 * c.ne
         self._pre = None          # cached preconditioner (GMRES path)
         self._patches = None      # (contact rows, PatchSpace) of the "patches" preconditioner
+        self._coarse_on = False   # its coarse level in use (COARSE_ON, COARSE_OFF)
+        self._coarse_used = False # ... in the current solve
         self._rows = None         # (G, nonlinear set, R and Psi on its coordinates)
         self._dense_left, self._dense_size = 0, 0     # dense solves owed to the last fallbacks
         self._gmres_failed = False                    # the last GMRES solve failed
@@ -553,10 +564,14 @@ class HarmonicBalance:
                 if not np.isfinite(res) or res > max(1e-7, rtol):
                     if self._pre is not None:
                         self._pre.worn = True      # a fresh one at the next solve
+                    self._coarse_on = True         # ("patches") with its coarse level
                     raise ConvergenceError("GMRES did not converge on the reduced Newton system", res)
             X[:, i] = x
-        if self._pre is not None:
+        patches = self.preconditioner == "patches"
+        if self._pre is not None and (self._coarse_used or not patches):
             self._pre.observe(most)
+        if patches:
+            self._coarse_on = most >= COARSE_OFF if self._coarse_used else most > COARSE_ON
         self._gmres_failed = False
         return X
 
@@ -768,8 +783,18 @@ class HarmonicBalance:
             self.stats["preconditioners"] += 1
 
         matvec = self._operator(omega, nl, cn, idx, Dg, R, Psi, Ls)
+        self._coarse_used = self.preconditioner == "patches" and self._coarse_on
+        if self.preconditioner == "patches" and not self._coarse_on:
+            return matvec, ElementBlockPreconditioner(R, Psi, Ls, Dg)
         if self.preconditioner == "patches":
-            return matvec, PatchPreconditioner(self._patch_space(), R, Psi, Ls, Dg)
+            # the element blocks fresh, the coarse factor reused as the other kinds are
+            space = self._patch_space()
+            pre = self._pre
+            if pre is None or not pre.usable(self.G, nl, omega):
+                pre = self._pre = _PreconditionerCache(self.G, nl, omega, R, Psi,
+                                                       CoarseFactor(space, Psi, Ls, Dg))
+                self.stats["preconditioners"] += 1
+            return matvec, PatchPreconditioner(space, R, Psi, Ls, Dg, coarse=pre.apply)
         if pre is None:
             return matvec, kind(R, Psi, Ls, Dg)
         if self.preconditioner == "two-level":

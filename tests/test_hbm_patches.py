@@ -2,7 +2,6 @@
 patches of elements (``hbm.preconditioner.PatchSpace``, ``PatchPreconditioner``)."""
 import numpy as np
 import pytest
-import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
 from hbm.preconditioner import (ElementBlockPreconditioner, PatchPreconditioner, PatchSpace,
@@ -105,8 +104,8 @@ def test_the_coarse_matrix_and_rows_are_those_of_the_dense_jacobian(H):
     M = PatchPreconditioner(space, R, Psi, Ls, Dg)
     Z = _coarse_basis(space)
     Ac = Z.T @ J @ Z
-    assert M.lu is not None
-    C = sla.lu_solve(M.lu, Ac)
+    assert M.coarse.lu is not None
+    C = M.coarse.solve(Ac)
     assert np.abs(C - np.eye(Ac.shape[0])).max() <= 1e-10
     rng = np.random.default_rng(2)
     z = rng.normal(size=J.shape[0])
@@ -156,6 +155,45 @@ def test_a_singular_coarse_matrix_leaves_the_element_blocks_alone():
     s = 1.0 / np.linalg.eigvalsh(Z.T @ G0 @ Z).max()
     Dg = -s * np.repeat(np.eye(3)[None], k, axis=0)
     M = PatchPreconditioner(space, R, Psi, Ls, Dg)
-    assert M.lu is None
+    assert M.coarse.lu is None
     r = np.random.default_rng(5).normal(size=3 * k)
     assert np.array_equal(M(r), ElementBlockPreconditioner(R, Psi, Ls, Dg)(r))
+
+
+def test_the_coarse_level_is_switched_on_and_off_by_the_gmres_iterations(monkeypatch):
+    # COARSE_ON / COARSE_OFF on a chain with friction elements (every Newton system on the GMRES
+    # path): never on where the element blocks alone always count as enough, on from the second
+    # solve where they never do (its coarse factor built, then reused for the same set), and on
+    # and off in turn where the coarse level never counts as paying; the same solution each time
+    import hbm.harmonic_balance as hbm_hb
+    from test_hbm_preconditioner import _solver
+    ref, _ = _solver(H=3, ne=20, n=150)
+    ref.dense_limit = 10 ** 6
+    w = 0.95 * np.sqrt(ref.G.lam[~ref.G.rigid][0])
+    f = np.zeros(ref.s.n)
+    f[0] = 40.0
+    s0 = ref.solve(w, f)
+    assert s0.n_nonlinear >= 8
+    used = {}
+    for name, on, off in (("never", 10 ** 6, 0), ("always", -1, 0), ("alternate", -1, 10 ** 6)):
+        monkeypatch.setattr(hbm_hb, "COARSE_ON", on)
+        monkeypatch.setattr(hbm_hb, "COARSE_OFF", off)
+        hb, _ = _solver(H=3, ne=20, n=150)
+        assert hb.preconditioner == "patches"
+        flags = []
+        orig = hb._krylov
+
+        def krylov(*a, **k):
+            out = orig(*a, **k)
+            flags.append(hb._coarse_used)
+            return out
+        hb._krylov = krylov
+        sol = hb.solve(w, f)
+        assert np.abs(sol.coefficients - s0.coefficients).max() <= 1e-7 * np.abs(s0.coefficients).max()
+        used[name] = (flags, hb.stats["preconditioners"])
+    flags, setups = used["never"]
+    assert len(flags) >= 3 and not any(flags) and setups == 0
+    flags, setups = used["always"]
+    assert not flags[0] and all(flags[1:]) and 1 <= setups < len(flags) - 1
+    flags, _ = used["alternate"]
+    assert flags[:4] == [False, True, False, True]
