@@ -256,11 +256,13 @@ GMRES_MAXITER = 4
 
 #: the "patches" preconditioner's coarse level is switched on when a solve with the element
 #: blocks alone took more than COARSE_ON GMRES iterations, and off again when a solve with it
-#: took fewer than COARSE_OFF (its set-up, about as much as the element blocks', then buys
-#: less than it saves): on the default model the top-level curves (41 iterations per solve
-#: with the element blocks alone, 15 with the patches) keep it, the middle level's v1 curve
-#: (14 against 10, 0.6 s slower with it) goes without
-COARSE_ON = 20
+#: took fewer than COARSE_OFF: an application costs about a quarter of an iteration more
+#: (0.25 ms at 353 elements) and a new coarse factor about one element-block set-up (7 ms),
+#: which a third fewer iterations do not repay. On the default model the top-level curves
+#: (41-49 iterations per solve with the element blocks alone, 16-23 with the patches) keep it;
+#: the middle level's (14-19 against 10-14) were 0.5-1 s slower each with it switched on at
+#: 20 iterations (two whole studies: +4 and +7 s over the eight middle-level curves)
+COARSE_ON = 30
 COARSE_OFF = 8
 
 
