@@ -25,9 +25,11 @@ Linear solver (what we chose and why)
   + the dense static residual block), preconditioned by ``preconditioner.PatchPreconditioner``
   (issue 16, session 28): each element's own block I + G_ee D_e (all harmonics coupled)
   inverted exactly (``ElementBlockPreconditioner``), then a coarse correction on patches of
-  about 15 elements (their uniform motion per direction and harmonic row, Z^T J Z by one LU),
-  both rebuilt at every solve: 14.6 GMRES iterations per solve on the default model's top-level
-  baseline sweep where the element blocks alone needed 41. The element blocks replaced (session 7)
+  about 15 elements (their uniform motion per direction and harmonic row, Z^T J Z by one LU,
+  reused like the other preconditioners' factors; switched on where the element blocks alone
+  need more than ``COARSE_ON`` iterations): 17 GMRES iterations per solve on the default
+  model's top-level baseline sweep where the element blocks alone needed 41. The element blocks
+  replaced (session 7)
   the harmonic-averaged one, the exact inverse of I + G_h k_bar (one real LU of I + R k_bar and a
   rank-m Woodbury correction per harmonic, reused while the nonlinear set stays the same and
   GMRES does not slow down, ``_PreconditionerCache``): on the default model's curves the element
