@@ -166,13 +166,8 @@ def test_the_coarse_level_is_switched_on_and_off_by_the_gmres_iterations(monkeyp
     # solve where they never do (its coarse factor built, then reused for the same set), and on
     # and off in turn where the coarse level never counts as paying; the same solution each time
     import hbm.harmonic_balance as hbm_hb
-    from test_hbm_preconditioner import _solver
-    ref, _ = _solver(H=3, ne=20, n=150)
-    ref.dense_limit = 10 ** 6
-    w = 0.95 * np.sqrt(ref.G.lam[~ref.G.rigid][0])
-    f = np.zeros(ref.s.n)
-    f[0] = 40.0
-    s0 = ref.solve(w, f)
+    from test_hbm_preconditioner import _reference_solution, _solver
+    w, f, s0 = _reference_solution(H=3, ne=20, n=150)
     assert s0.n_nonlinear >= 8
     used = {}
     for name, on, off in (("never", 10 ** 6, 0), ("always", -1, 0), ("alternate", -1, 10 ** 6)):
