@@ -312,7 +312,8 @@ class TwoLevelPreconditioner:
 #: elements per patch of the two-level preconditioner's coarse space (``PatchPreconditioner``):
 #: on Newton systems captured from the default model's top-level baseline sweep, patches of 12 /
 #: 15 / 20 elements took 211 / 239 / 268 GMRES iterations where the element blocks took 1192
-#: (28 systems); the coarse LU grows as (21 k / PATCH_ELEMENTS)^3
+#: (28 systems); the coarse LU grows as (21 k / PATCH_ELEMENTS)^3: on whole top-level curves
+#: 10 or 12 elements per patch saved 5-10 % of the iterations and took longer
 PATCH_ELEMENTS = 15
 #: medoid refinements of the patches (``interface_patches``): one or three gave 239 / 240
 #: iterations on those systems against 282 with the farthest-point seeds alone
@@ -507,9 +508,7 @@ class PatchPreconditioner:
         self.element = ElementBlockPreconditioner(R, Psi, Ls, Dg)
         self.coarse = CoarseFactor(space, Psi, Ls, Dg) if coarse is None else coarse
         self.space, self.Dg, self.Ls, self.Psi = space, Dg, Ls, Psi
-        k, nH = space.k, space.nH
-        d, hh = np.divmod(np.arange(3 * nH), nH)
-        self.idx = hh[None, :] * 3 * k + 3 * np.arange(k)[:, None] + d[None, :]
+        self.idx = self.element.idx           # reduced-layout index of the element layout
 
     def coarse_rows(self, z: np.ndarray) -> np.ndarray:
         """Z^T J z for z (n_H p,) in the reduced layout, from the coarse rows of R and Psi."""
