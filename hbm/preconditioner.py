@@ -468,7 +468,6 @@ class CoarseFactor:
     """
 
     def __init__(self, space: PatchSpace, Psi: np.ndarray, Ls: list, Dg: np.ndarray) -> None:
-        self.space = space
         lu, piv = sla.lu_factor(coarse_matrix(space, Psi, Ls, Dg), check_finite=False)
         pivots = np.abs(np.diag(lu))
         ok = np.all(np.isfinite(lu)) and pivots.min() > 1e-13 * pivots.max()
